@@ -1,0 +1,351 @@
+//! Tracker configuration: user-facing [`TrackerConfig`] (serde, strict) validated once into
+//! a [`TrackerSpec`] that the rest of the core trusts.
+//!
+//! `TrackerConfig::default()` equals `config/bevt.yaml` (a test checks it). Every number of
+//! ALGORITHM.md is a field here; where the paper and the reference MATLAB differ the choice
+//! is an enum, and its default is documented on the field.
+
+use crate::error::ConfigError;
+use crate::filter::admm::{AdmmParams, PenaltyKind};
+use crate::verify::{ConsensusNorm, VerifyParams};
+use serde::{Deserialize, Serialize};
+
+/// Which features the tracker uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FeatureKind {
+    /// Felzenszwalb HOG (31 channels), optionally + grayscale: the fast default.
+    Hog,
+}
+
+/// Feature settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FeatureConfig {
+    /// Feature type.
+    pub kind: FeatureKind,
+    /// HOG cell size, pixels (ref 4). Smaller cells are chosen for small targets.
+    pub hog_cell_size: usize,
+    /// Append a grayscale channel (cell-mean luminance) to HOG.
+    pub grayscale: bool,
+}
+
+impl Default for FeatureConfig {
+    fn default() -> Self {
+        Self {
+            kind: FeatureKind::Hog,
+            hog_cell_size: 4,
+            grayscale: true,
+        }
+    }
+}
+
+/// Search-window geometry (ALGORITHM.md §1, §3).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WindowConfig {
+    /// Search square side as a multiple of `sqrt(w·h)` (ref 5).
+    pub search_area_scale: f32,
+    /// Extra factor on the patch side (ref 1.2).
+    pub padding: f32,
+    /// Largest filter area, cells² (ref 50² = 2500); larger searches are downscaled.
+    pub filter_max_area: f32,
+    /// Choose a smaller cell when the search area is below this fraction of
+    /// `filter_max_area` (ref 0.75² = 0.5625).
+    pub cell_selection_thresh: f32,
+    /// Label σ as a fraction of `sqrt(target cells)` (ref 1/16).
+    pub output_sigma_factor: f32,
+}
+
+impl Default for WindowConfig {
+    fn default() -> Self {
+        Self {
+            search_area_scale: 5.0,
+            padding: 1.2,
+            filter_max_area: 2500.0,
+            cell_selection_thresh: 0.5625,
+            output_sigma_factor: 1.0 / 16.0,
+        }
+    }
+}
+
+/// ADMM training (ALGORITHM.md §4).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AdmmConfig {
+    /// Iterations per training (ref 3).
+    pub iterations: usize,
+    /// Initial μ (ref 1).
+    pub mu_init: f32,
+    /// μ growth β (ref run_BEVT.m: 20; a comment there says 10).
+    pub beta: f32,
+    /// Largest μ (ref 10000).
+    pub mu_max: f32,
+    /// Ridge λ of the `none` penalty (BACF 0.01).
+    pub lambda: f32,
+    /// Penalty form: `matrix` (reference), `elementwise` (the paper's eq. 8), `none` (BACF).
+    pub penalty: PenaltyKind,
+    /// Penalty window minimum at the target centre (ref 0.1).
+    pub reg_window_min: f32,
+    /// Penalty window value at the target edge (ref 0.8).
+    pub reg_window_edge: f32,
+}
+
+impl Default for AdmmConfig {
+    fn default() -> Self {
+        Self {
+            iterations: 3,
+            mu_init: 1.0,
+            beta: 20.0,
+            mu_max: 10000.0,
+            lambda: 0.01,
+            penalty: PenaltyKind::Matrix,
+            reg_window_min: 0.1,
+            reg_window_edge: 0.8,
+        }
+    }
+}
+
+/// Detection and scale search (ALGORITHM.md §5).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DetectionConfig {
+    /// Scales tried per frame (ref 5).
+    pub number_of_scales: usize,
+    /// Ratio between neighbouring scales (ref 1.01).
+    pub scale_step: f32,
+    /// Newton iterations of the sub-cell peak (ref 50; stops early once converged).
+    pub newton_iterations: usize,
+}
+
+impl Default for DetectionConfig {
+    fn default() -> Self {
+        Self {
+            number_of_scales: 5,
+            scale_step: 1.01,
+            newton_iterations: 50,
+        }
+    }
+}
+
+/// Appearance-model learning rates (ALGORITHM.md §6).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LearningConfig {
+    /// Base rate η (ref 0.013).
+    pub rate: f32,
+    /// Reinforced rate when consensus ≥ `threshold_high` (ref 0.019).
+    pub reinforced_rate: f32,
+}
+
+impl Default for LearningConfig {
+    fn default() -> Self {
+        Self {
+            rate: 0.013,
+            reinforced_rate: 0.019,
+        }
+    }
+}
+
+/// Multi-frame consensus verification (ALGORITHM.md §6).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VerificationConfig {
+    /// Off: learn every frame at the base rate (ablation).
+    pub enabled: bool,
+    /// `spectral` (reference) or `frobenius_sq` (paper).
+    pub norm: ConsensusNorm,
+    /// At or below: do not learn (ref 0.20).
+    pub threshold_low: f32,
+    /// At or above: learn with the reinforced rate (ref 0.50).
+    pub threshold_high: f32,
+    /// Rate γ of the ideal response model (ref 0.013).
+    pub response_model_rate: f32,
+}
+
+impl Default for VerificationConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            norm: ConsensusNorm::Spectral,
+            threshold_low: 0.2,
+            threshold_high: 0.5,
+            response_model_rate: 0.013,
+        }
+    }
+}
+
+/// Everything the tracker can be told. See `config/bevt.yaml` for the annotated defaults.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrackerConfig {
+    /// Features.
+    pub features: FeatureConfig,
+    /// Window geometry.
+    pub window: WindowConfig,
+    /// ADMM training.
+    pub admm: AdmmConfig,
+    /// Detection and scale.
+    pub detection: DetectionConfig,
+    /// Learning rates.
+    pub learning: LearningConfig,
+    /// Consensus verification.
+    pub verification: VerificationConfig,
+    /// Worker threads for the per-scale work of one frame (1 = sequential). Work runs on
+    /// the caller's rayon pool; the core spawns no threads itself.
+    pub threads: usize,
+}
+
+impl Default for TrackerConfig {
+    fn default() -> Self {
+        Self {
+            features: FeatureConfig::default(),
+            window: WindowConfig::default(),
+            admm: AdmmConfig::default(),
+            detection: DetectionConfig::default(),
+            learning: LearningConfig::default(),
+            verification: VerificationConfig::default(),
+            threads: 1,
+        }
+    }
+}
+
+/// A validated configuration: what the tracker is built from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackerSpec {
+    /// The validated configuration.
+    pub config: TrackerConfig,
+    /// ADMM parameters.
+    pub admm: AdmmParams,
+    /// Verification parameters.
+    pub verify: VerifyParams,
+}
+
+fn check(ok: bool, field: &'static str, value: impl ToString, expected: &'static str) -> Result<(), ConfigError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ConfigError::OutOfRange {
+            field,
+            value: value.to_string(),
+            expected,
+        })
+    }
+}
+
+fn finite_pos(v: f32) -> bool {
+    v.is_finite() && v > 0.0
+}
+
+impl TrackerConfig {
+    /// Checks every field once and derives the solver parameters.
+    ///
+    /// # Errors
+    /// [`ConfigError`] naming the first offending field.
+    pub fn validate(&self) -> Result<TrackerSpec, ConfigError> {
+        let f = &self.features;
+        check((1..=16).contains(&f.hog_cell_size), "features.hog_cell_size", f.hog_cell_size, "1..=16 pixels")?;
+        let w = &self.window;
+        check(finite_pos(w.search_area_scale) && w.search_area_scale >= 1.0, "window.search_area_scale", w.search_area_scale, ">= 1")?;
+        check(finite_pos(w.padding) && w.padding >= 1.0, "window.padding", w.padding, ">= 1")?;
+        check(finite_pos(w.filter_max_area) && w.filter_max_area >= 16.0 && w.filter_max_area <= 65536.0, "window.filter_max_area", w.filter_max_area, "16..=65536 cells²")?;
+        check(finite_pos(w.cell_selection_thresh) && w.cell_selection_thresh <= 1.0, "window.cell_selection_thresh", w.cell_selection_thresh, "(0, 1]")?;
+        check(finite_pos(w.output_sigma_factor), "window.output_sigma_factor", w.output_sigma_factor, "> 0")?;
+        let a = &self.admm;
+        check((1..=100).contains(&a.iterations), "admm.iterations", a.iterations, "1..=100")?;
+        check(finite_pos(a.mu_init), "admm.mu_init", a.mu_init, "> 0")?;
+        check(a.beta.is_finite() && a.beta >= 1.0, "admm.beta", a.beta, ">= 1")?;
+        check(finite_pos(a.mu_max) && a.mu_max >= a.mu_init, "admm.mu_max", a.mu_max, ">= admm.mu_init")?;
+        check(a.lambda.is_finite() && a.lambda >= 0.0, "admm.lambda", a.lambda, ">= 0")?;
+        check(a.reg_window_min.is_finite() && a.reg_window_min >= 0.0, "admm.reg_window_min", a.reg_window_min, ">= 0")?;
+        check(a.reg_window_edge.is_finite() && a.reg_window_edge >= a.reg_window_min, "admm.reg_window_edge", a.reg_window_edge, ">= admm.reg_window_min")?;
+        let d = &self.detection;
+        check(d.number_of_scales >= 1 && d.number_of_scales <= 33, "detection.number_of_scales", d.number_of_scales, "1..=33")?;
+        check(d.scale_step.is_finite() && d.scale_step > 1.0 && d.scale_step < 2.0, "detection.scale_step", d.scale_step, "(1, 2)")?;
+        check(d.newton_iterations <= 1000, "detection.newton_iterations", d.newton_iterations, "0..=1000")?;
+        let l = &self.learning;
+        check(l.rate.is_finite() && (0.0..=1.0).contains(&l.rate), "learning.rate", l.rate, "[0, 1]")?;
+        check(l.reinforced_rate.is_finite() && (0.0..=1.0).contains(&l.reinforced_rate), "learning.reinforced_rate", l.reinforced_rate, "[0, 1]")?;
+        let v = &self.verification;
+        check(v.threshold_low.is_finite() && (0.0..=1.0).contains(&v.threshold_low), "verification.threshold_low", v.threshold_low, "[0, 1]")?;
+        check(v.threshold_high.is_finite() && (0.0..=1.0).contains(&v.threshold_high), "verification.threshold_high", v.threshold_high, "[0, 1]")?;
+        if v.threshold_high < v.threshold_low {
+            return Err(ConfigError::Inconsistent(format!(
+                "verification.threshold_high ({}) is below threshold_low ({})",
+                v.threshold_high, v.threshold_low
+            )));
+        }
+        check(v.response_model_rate.is_finite() && (0.0..=1.0).contains(&v.response_model_rate), "verification.response_model_rate", v.response_model_rate, "[0, 1]")?;
+        check((1..=256).contains(&self.threads), "threads", self.threads, "1..=256")?;
+        Ok(TrackerSpec {
+            config: self.clone(),
+            admm: AdmmParams {
+                iterations: a.iterations,
+                mu_init: a.mu_init,
+                beta: a.beta,
+                mu_max: a.mu_max,
+                lambda: a.lambda,
+                penalty: a.penalty,
+            },
+            verify: VerifyParams {
+                norm: v.norm,
+                threshold_low: v.threshold_low,
+                threshold_high: v.threshold_high,
+                rate: l.rate,
+                reinforced_rate: l.reinforced_rate,
+            },
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_config_is_valid() {
+        TrackerConfig::default().validate().unwrap();
+    }
+
+    #[test]
+    fn bad_values_name_their_field() {
+        let mut c = TrackerConfig::default();
+        c.admm.iterations = 0;
+        match c.validate() {
+            Err(ConfigError::OutOfRange { field, .. }) => assert_eq!(field, "admm.iterations"),
+            other => panic!("{other:?}"),
+        }
+        let mut c = TrackerConfig::default();
+        c.detection.scale_step = f32::NAN;
+        assert!(c.validate().is_err());
+        let mut c = TrackerConfig::default();
+        c.verification.threshold_high = 0.1;
+        assert!(matches!(c.validate(), Err(ConfigError::Inconsistent(_))));
+    }
+
+    #[test]
+    fn default_equals_the_shipped_yaml() {
+        let text = include_str!("../../config/bevt.yaml");
+        let c: TrackerConfig = serde_norway::from_str(text).unwrap();
+        assert_eq!(c, TrackerConfig::default());
+    }
+
+    #[test]
+    fn missing_keys_take_defaults_and_unknown_keys_are_rejected() {
+        let c: TrackerConfig = serde_norway::from_str("admm:\n  iterations: 2\n").unwrap();
+        assert_eq!(c.admm.iterations, 2);
+        assert_eq!(c.detection, DetectionConfig::default());
+        assert!(serde_norway::from_str::<TrackerConfig>("admm:\n  iteratons: 2\n").is_err());
+        assert!(serde_norway::from_str::<TrackerConfig>("admm:\n  penalty: bogus\n").is_err());
+    }
+
+    #[test]
+    fn yaml_round_trips() {
+        let mut c = TrackerConfig::default();
+        c.admm.penalty = PenaltyKind::Elementwise;
+        c.verification.norm = ConsensusNorm::FrobeniusSq;
+        let s = serde_norway::to_string(&c).unwrap();
+        let d: TrackerConfig = serde_norway::from_str(&s).unwrap();
+        assert_eq!(c, d);
+    }
+}

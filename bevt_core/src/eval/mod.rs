@@ -1,0 +1,4 @@
+//! Evaluation helpers: OPE metrics and synthetic sequences with ground truth.
+
+pub mod metrics;
+pub mod synth;

@@ -1,0 +1,360 @@
+//! Felzenszwalb HOG ("fHOG", as P. Dollár's `fhog` computes it), 31 channels, plus an
+//! optional grayscale channel.
+//!
+//! Per pixel: central-difference gradient (one-sided at the patch border; for colour the
+//! channel of largest magnitude), hard orientation binning into 18 contrast-sensitive bins
+//! (nearest of `k·20°`), bilinear spatial voting into cells with weight `|∇I| / cell²`.
+//! Per cell, four 2×2-block energies of the 9 contrast-insensitive histograms give four
+//! normalisers `n_k = 1/sqrt(energy + ε)`. Channels: 18 sensitive and 9 insensitive bins
+//! `0.5·Σ_k min(h·n_k, 0.2)`, then 4 texture channels `0.2357·Σ_o min(h_o·n_k, 0.2)`.
+//! (Dollár's 32nd, all-zero channel is dropped.)
+
+use super::{gray, FeatureExtractor, FeatureMap, LayerInfo};
+use crate::error::TrackError;
+use crate::image::Patch;
+
+/// Number of contrast-insensitive orientations.
+pub const ORIENTATIONS: usize = 9;
+/// Number of HOG channels: 2·9 sensitive + 9 insensitive + 4 texture.
+pub const HOG_CHANNELS: usize = 3 * ORIENTATIONS + 4;
+/// Truncation of normalised histogram values.
+const CLIP: f32 = 0.2;
+/// Weight of the texture (gradient energy) channels, `1/sqrt(18)`.
+const TEXTURE_WEIGHT: f32 = 0.2357;
+
+/// The fHOG extractor with its scratch buffers.
+#[derive(Debug, Clone)]
+pub struct Hog {
+    cell: usize,
+    grayscale: bool,
+    layers: Vec<LayerInfo>,
+    /// Direction unit vectors of the 9 half-plane orientations.
+    dirs: [(f32, f32); ORIENTATIONS],
+    hist: Vec<f32>,
+    energy: Vec<f32>,
+    norm: Vec<f32>,
+    col_bin: Vec<(isize, f32)>,
+    mag: Vec<f32>,
+    bin: Vec<u8>,
+}
+
+impl Hog {
+    /// An extractor with maximal cell size `cell` (pixels), optionally appending a
+    /// grayscale channel.
+    pub fn new(cell: usize, grayscale: bool) -> Self {
+        let channels = HOG_CHANNELS + usize::from(grayscale);
+        let name = if grayscale { "hog+gray" } else { "hog" };
+        let mut dirs = [(0.0, 0.0); ORIENTATIONS];
+        for (k, d) in dirs.iter_mut().enumerate() {
+            let a = k as f32 * std::f32::consts::PI / ORIENTATIONS as f32;
+            *d = (a.cos(), a.sin());
+        }
+        Self {
+            cell: cell.max(1),
+            grayscale,
+            layers: vec![LayerInfo {
+                name: name.into(),
+                channels,
+                weight: 1.0,
+            }],
+            dirs,
+            hist: Vec::new(),
+            energy: Vec::new(),
+            norm: Vec::new(),
+            col_bin: Vec::new(),
+            mag: Vec::new(),
+            bin: Vec::new(),
+        }
+    }
+
+    /// Gradient magnitude and orientation bin (0..18) of every pixel.
+    fn gradients(&mut self, patch: &Patch) {
+        let s = patch.side;
+        let n = s * s;
+        self.mag.resize(n, 0.0);
+        self.bin.resize(n, 0);
+        for r in 0..s {
+            let (ru, rd, sy) = match (r, s) {
+                (_, 1) => (0, 0, 0.0),
+                (0, _) => (0, 1, 1.0),
+                (r, s) if r == s - 1 => (r - 1, r, 1.0),
+                (r, _) => (r - 1, r + 1, 0.5),
+            };
+            for c in 0..s {
+                let (cl, cr, sx) = match (c, s) {
+                    (_, 1) => (0, 0, 0.0),
+                    (0, _) => (0, 1, 1.0),
+                    (c, s) if c == s - 1 => (c - 1, c, 1.0),
+                    (c, _) => (c - 1, c + 1, 0.5),
+                };
+                let mut best = (0.0f32, 0.0f32, -1.0f32);
+                for p in 0..patch.planes {
+                    let pl = &patch.data[p * n..(p + 1) * n];
+                    let gx = (pl[r * s + cr] - pl[r * s + cl]) * sx;
+                    let gy = (pl[rd * s + c] - pl[ru * s + c]) * sy;
+                    let m2 = gx * gx + gy * gy;
+                    if m2 > best.2 {
+                        best = (gx, gy, m2);
+                    }
+                }
+                let (gx, gy, m2) = best;
+                let mut kbest = 0usize;
+                let mut dbest = 0.0f32;
+                for (k, &(u, v)) in self.dirs.iter().enumerate() {
+                    let d = u * gx + v * gy;
+                    if d.abs() > dbest.abs() {
+                        dbest = d;
+                        kbest = k;
+                    }
+                }
+                let o = if dbest < 0.0 { kbest + ORIENTATIONS } else { kbest };
+                self.mag[r * s + c] = m2.max(0.0).sqrt();
+                self.bin[r * s + c] = o as u8;
+            }
+        }
+    }
+
+    /// Histograms `hist[o][cy][cx]` (18 sensitive bins) with bilinear spatial voting.
+    fn histograms(&mut self, side: usize, cell: usize, hb: usize, wb: usize) {
+        let nb = hb * wb;
+        let no = 2 * ORIENTATIONS;
+        self.hist.clear();
+        self.hist.resize(no * nb, 0.0);
+        let inv = 1.0 / cell as f32;
+        let norm = inv * inv;
+        let used = (wb * cell).min(side);
+        self.col_bin.clear();
+        for x in 0..used {
+            let xb = (x as f32 + 0.5) * inv - 0.5;
+            let x0 = xb.floor();
+            self.col_bin.push((x0 as isize, xb - x0));
+        }
+        for y in 0..(hb * cell).min(side) {
+            let yb = (y as f32 + 0.5) * inv - 0.5;
+            let y0f = yb.floor();
+            let y0 = y0f as isize;
+            let yd = yb - y0f;
+            for (x, &(x0, xd)) in self.col_bin.iter().enumerate() {
+                let m = self.mag[y * side + x] * norm;
+                if m == 0.0 {
+                    continue;
+                }
+                let h = &mut self.hist[self.bin[y * side + x] as usize * nb..][..nb];
+                let ws = [
+                    (y0, x0, (1.0 - yd) * (1.0 - xd)),
+                    (y0, x0 + 1, (1.0 - yd) * xd),
+                    (y0 + 1, x0, yd * (1.0 - xd)),
+                    (y0 + 1, x0 + 1, yd * xd),
+                ];
+                for (cy, cx, w) in ws {
+                    if cy >= 0 && cx >= 0 && (cy as usize) < hb && (cx as usize) < wb {
+                        h[cy as usize * wb + cx as usize] += m * w;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Block normalisers `norm[(hb+1) × (wb+1)]` from the insensitive histograms.
+    fn normalisers(&mut self, cell: usize, hb: usize, wb: usize) {
+        let nb = hb * wb;
+        self.energy.clear();
+        self.energy.resize(nb, 0.0);
+        for o in 0..ORIENTATIONS {
+            let a = &self.hist[o * nb..(o + 1) * nb];
+            let b = &self.hist[(o + ORIENTATIONS) * nb..(o + ORIENTATIONS + 1) * nb];
+            for ((e, x), y) in self.energy.iter_mut().zip(a).zip(b) {
+                let v = x + y;
+                *e += v * v;
+            }
+        }
+        let c4 = (cell * cell * cell * cell) as f32;
+        let eps = 1e-4 / 4.0 / c4;
+        let (hb1, wb1) = (hb + 1, wb + 1);
+        self.norm.clear();
+        self.norm.resize(hb1 * wb1, 0.0);
+        // Interior entries (i, j) in 1..hb × 1..wb: the block of cells (i-1..=i, j-1..=j);
+        // border entries replicate the nearest interior one.
+        let clampi = |i: usize, n: usize| i.clamp(1, n.saturating_sub(1).max(1));
+        for i in 0..hb1 {
+            for j in 0..wb1 {
+                let bi = clampi(i, hb) - 1;
+                let bj = clampi(j, wb) - 1;
+                let e = |y: usize, x: usize| self.energy[y.min(hb - 1) * wb + x.min(wb - 1)];
+                let s = e(bi, bj) + e(bi, bj + 1) + e(bi + 1, bj) + e(bi + 1, bj + 1);
+                self.norm[i * wb1 + j] = 1.0 / (s + eps).sqrt();
+            }
+        }
+    }
+}
+
+impl FeatureExtractor for Hog {
+    fn layers(&self) -> &[LayerInfo] {
+        &self.layers
+    }
+
+    fn cell_size(&self) -> usize {
+        self.cell
+    }
+
+    fn extract(
+        &mut self,
+        patch: &Patch,
+        cell: usize,
+        out: &mut FeatureMap,
+    ) -> Result<(), TrackError> {
+        let (hb, wb) = (out.grid.h, out.grid.w);
+        let nb = hb * wb;
+        if cell == 0 || hb < 2 || wb < 2 || patch.side < hb * cell || patch.side < wb * cell {
+            return Err(TrackError::Feature(format!(
+                "patch of side {} cannot give a {hb}x{wb} grid of {cell}-px cells",
+                patch.side
+            )));
+        }
+        if out.channels != self.channels() || out.data.len() != nb * out.channels {
+            return Err(TrackError::Feature(format!(
+                "feature map has {} channels, hog gives {}",
+                out.channels,
+                self.channels()
+            )));
+        }
+        self.gradients(patch);
+        self.histograms(patch.side, cell, hb, wb);
+        self.normalisers(cell, hb, wb);
+        let wb1 = wb + 1;
+        let no = 2 * ORIENTATIONS;
+        out.data[..HOG_CHANNELS * nb].iter_mut().for_each(|v| *v = 0.0);
+        for cy in 0..hb {
+            for cx in 0..wb {
+                let i = cy * wb + cx;
+                let n = [
+                    self.norm[(cy + 1) * wb1 + cx + 1],
+                    self.norm[cy * wb1 + cx + 1],
+                    self.norm[(cy + 1) * wb1 + cx],
+                    self.norm[cy * wb1 + cx],
+                ];
+                let mut tex = [0.0f32; 4];
+                for o in 0..no {
+                    let h = self.hist[o * nb + i];
+                    let mut acc = 0.0;
+                    for (k, nk) in n.iter().enumerate() {
+                        let t = (h * nk).min(CLIP);
+                        acc += t;
+                        tex[k] += t;
+                    }
+                    out.data[o * nb + i] = 0.5 * acc;
+                }
+                for o in 0..ORIENTATIONS {
+                    let h = self.hist[o * nb + i] + self.hist[(o + ORIENTATIONS) * nb + i];
+                    let acc: f32 = n.iter().map(|nk| (h * nk).min(CLIP)).sum();
+                    out.data[(no + o) * nb + i] = 0.5 * acc;
+                }
+                for (k, t) in tex.iter().enumerate() {
+                    out.data[(3 * ORIENTATIONS + k) * nb + i] = TEXTURE_WEIGHT * t;
+                }
+            }
+        }
+        if self.grayscale {
+            gray::cell_gray(
+                patch,
+                cell,
+                hb,
+                wb,
+                &mut out.data[HOG_CHANNELS * nb..(HOG_CHANNELS + 1) * nb],
+            );
+        }
+        Ok(())
+    }
+
+    fn boxed_clone(&self) -> Box<dyn FeatureExtractor> {
+        Box::new(self.clone())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::GridSize;
+
+    fn extract(p: &Patch, cell: usize, gray: bool) -> FeatureMap {
+        let mut hog = Hog::new(cell, gray);
+        let g = p.side / cell;
+        let mut f = FeatureMap::new(GridSize { h: g, w: g }, hog.channels());
+        hog.extract(p, cell, &mut f).unwrap();
+        f
+    }
+
+    #[test]
+    fn hog_has_31_channels_and_32_with_gray() {
+        assert_eq!(Hog::new(4, false).channels(), 31);
+        assert_eq!(Hog::new(4, true).channels(), 32);
+    }
+
+    #[test]
+    fn flat_patch_gives_all_zero_hog() {
+        let mut p = Patch::new(32, 3);
+        p.data.iter_mut().for_each(|v| *v = 77.0);
+        let f = extract(&p, 4, false);
+        assert!(f.data.iter().all(|v| v.abs() < 1e-6));
+    }
+
+    #[test]
+    fn vertical_edge_votes_into_the_horizontal_gradient_bin() {
+        // Intensity rises left to right: gradient points along +x, orientation 0.
+        let s = 32;
+        let mut p = Patch::new(s, 1);
+        for r in 0..s {
+            for c in 0..s {
+                p.data[r * s + c] = if c >= s / 2 { 200.0 } else { 0.0 };
+            }
+        }
+        let f = extract(&p, 4, false);
+        let nb = 64;
+        let i = 3 * 8 + 3; // cell next to the edge
+        let sens: Vec<f32> = (0..18).map(|o| f.data[o * nb + i]).collect();
+        let (best, _) = sens
+            .iter()
+            .enumerate()
+            .fold((0, f32::MIN), |a, (k, &v)| if v > a.1 { (k, v) } else { a });
+        assert_eq!(best, 0, "{sens:?}");
+        // Contrast-insensitive bin 0 carries it too; the opposite sensitive bin does not.
+        assert!(f.data[18 * nb + i] > 0.1);
+        assert!(f.data[9 * nb + i] < 1e-6);
+        // A darkening edge lands in the opposite sensitive bin.
+        for v in &mut p.data {
+            *v = 200.0 - *v;
+        }
+        let g = extract(&p, 4, false);
+        assert!(g.data[9 * nb + i] > 0.1);
+    }
+
+    #[test]
+    fn values_are_bounded_by_the_clip() {
+        let s = 40;
+        let mut p = Patch::new(s, 3);
+        for (i, v) in p.data.iter_mut().enumerate() {
+            *v = ((i * 7919) % 255) as f32;
+        }
+        let f = extract(&p, 4, true);
+        let nb = 100;
+        for d in 0..27 {
+            for i in 0..nb {
+                let v = f.data[d * nb + i];
+                assert!((0.0..=0.4 + 1e-5).contains(&v), "{d} {v}");
+            }
+        }
+        for d in 27..31 {
+            for i in 0..nb {
+                assert!(f.data[d * nb + i] <= TEXTURE_WEIGHT * 18.0 * CLIP + 1e-4);
+            }
+        }
+    }
+
+    #[test]
+    fn too_small_patch_is_an_error() {
+        let p = Patch::new(4, 1);
+        let mut hog = Hog::new(4, false);
+        let mut f = FeatureMap::new(GridSize { h: 4, w: 4 }, 31);
+        assert!(hog.extract(&p, 4, &mut f).is_err());
+    }
+}

@@ -1,0 +1,97 @@
+//! Feature extraction behind one trait, so hand-crafted and CNN features are
+//! interchangeable.
+//!
+//! A [`FeatureExtractor`] turns an image [`Patch`] into a [`FeatureMap`]: channel-major
+//! `f32` maps on the tracker's cell grid. Channels are grouped into *layers*; each layer
+//! gets its own correlation filter and its response is fused with the layer's weight
+//! (ALGORITHM.md §2).
+
+pub mod gray;
+pub mod hog;
+
+use crate::error::TrackError;
+use crate::geometry::GridSize;
+use crate::image::Patch;
+
+pub use hog::{Hog, HOG_CHANNELS};
+
+/// One group of channels that gets its own filter.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LayerInfo {
+    /// Name for logs, e.g. `hog+gray`.
+    pub name: String,
+    /// Number of channels.
+    pub channels: usize,
+    /// Weight of this layer's response in the fused response.
+    pub weight: f32,
+}
+
+/// Channel-major feature maps on a `grid`: `data[(d * h + r) * w + c]`.
+#[derive(Debug, Clone, Default)]
+pub struct FeatureMap {
+    /// The cell grid.
+    pub grid: GridSize,
+    /// Number of channels.
+    pub channels: usize,
+    /// The values.
+    pub data: Vec<f32>,
+}
+
+impl FeatureMap {
+    /// A zeroed map.
+    pub fn new(grid: GridSize, channels: usize) -> Self {
+        Self {
+            grid,
+            channels,
+            data: vec![0.0; grid.len() * channels],
+        }
+    }
+
+    /// One channel.
+    pub fn channel(&self, d: usize) -> &[f32] {
+        let n = self.grid.len();
+        &self.data[d * n..(d + 1) * n]
+    }
+
+    /// Multiplies every channel by `window` (same grid).
+    pub fn apply_window(&mut self, window: &[f32]) {
+        let n = self.grid.len();
+        for ch in self.data.chunks_exact_mut(n) {
+            for (v, w) in ch.iter_mut().zip(window) {
+                *v *= w;
+            }
+        }
+    }
+}
+
+/// Something that maps image patches to feature maps.
+pub trait FeatureExtractor: Send {
+    /// The channel groups, in channel order; their channel counts sum to the map's.
+    fn layers(&self) -> &[LayerInfo];
+
+    /// Total number of channels.
+    fn channels(&self) -> usize {
+        self.layers().iter().map(|l| l.channels).sum()
+    }
+
+    /// The largest cell size (pixels per feature cell) this extractor supports; the
+    /// tracker may choose a smaller one for small targets.
+    fn cell_size(&self) -> usize;
+
+    /// Whether the tracker may choose a cell smaller than [`Self::cell_size`] for small
+    /// targets (ALGORITHM.md §1). CNN features have a fixed stride and answer false.
+    fn allows_smaller_cells(&self) -> bool {
+        true
+    }
+
+    /// Extracts features of `patch` (side `out.grid.w × cell` pixels) into `out`, whose grid
+    /// and channel count are preset by the caller.
+    ///
+    /// # Errors
+    /// [`TrackError::Feature`] when the backend fails.
+    fn extract(&mut self, patch: &Patch, cell: usize, out: &mut FeatureMap)
+        -> Result<(), TrackError>;
+
+    /// An independent extractor with the same settings (one per parallel worker).
+    fn boxed_clone(&self) -> Box<dyn FeatureExtractor>;
+}

@@ -1,0 +1,402 @@
+//! Borrowed frames and the anti-aliased, border-replicating patch sampler.
+//!
+//! [`Frame`] is a zero-copy view of a camera buffer (so the ROS node can hand over
+//! message data directly). [`Sampler`] crops a square region around a point, at any
+//! scale, into a fixed-size planar `f32` [`Patch`]: large downscales are first
+//! box-averaged by an integer factor (anti-aliasing), then resampled bilinearly.
+//! Pixels outside the frame replicate the nearest border pixel.
+
+use crate::error::TrackError;
+use crate::geometry::Point2;
+use serde::{Deserialize, Serialize};
+
+/// Pixel layout of a [`Frame`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PixelFormat {
+    /// 8-bit red, green, blue, interleaved.
+    Rgb8,
+    /// 8-bit blue, green, red, interleaved.
+    Bgr8,
+    /// 8-bit red, green, blue, alpha.
+    Rgba8,
+    /// 8-bit blue, green, red, alpha.
+    Bgra8,
+    /// 8-bit grey.
+    Mono8,
+}
+
+impl PixelFormat {
+    /// Bytes per pixel.
+    pub const fn bytes_per_pixel(self) -> usize {
+        match self {
+            PixelFormat::Rgb8 | PixelFormat::Bgr8 => 3,
+            PixelFormat::Rgba8 | PixelFormat::Bgra8 => 4,
+            PixelFormat::Mono8 => 1,
+        }
+    }
+
+    /// Byte offsets of red, green and blue within a pixel (all 0 for grey).
+    const fn rgb_offsets(self) -> [usize; 3] {
+        match self {
+            PixelFormat::Rgb8 | PixelFormat::Rgba8 => [0, 1, 2],
+            PixelFormat::Bgr8 | PixelFormat::Bgra8 => [2, 1, 0],
+            PixelFormat::Mono8 => [0, 0, 0],
+        }
+    }
+
+    /// Number of colour planes a patch sampled from this format has (3 or 1).
+    pub const fn planes(self) -> usize {
+        match self {
+            PixelFormat::Mono8 => 1,
+            _ => 3,
+        }
+    }
+
+    /// The ROS `sensor_msgs/Image` encoding name.
+    pub const fn name(self) -> &'static str {
+        match self {
+            PixelFormat::Rgb8 => "rgb8",
+            PixelFormat::Bgr8 => "bgr8",
+            PixelFormat::Rgba8 => "rgba8",
+            PixelFormat::Bgra8 => "bgra8",
+            PixelFormat::Mono8 => "mono8",
+        }
+    }
+}
+
+/// Largest accepted frame side, pixels (guards against absurd sizes from untrusted headers).
+pub const MAX_FRAME_SIDE: usize = 1 << 15;
+
+/// A borrowed 8-bit image: `height` rows of `stride` bytes, `width` pixels each.
+#[derive(Debug, Clone, Copy)]
+pub struct Frame<'a> {
+    data: &'a [u8],
+    width: usize,
+    height: usize,
+    stride: usize,
+    format: PixelFormat,
+}
+
+impl<'a> Frame<'a> {
+    /// Wraps a buffer.
+    ///
+    /// # Errors
+    /// [`TrackError::InvalidFrame`] when a side is zero or above [`MAX_FRAME_SIDE`], the
+    /// stride is shorter than a row, or the buffer is shorter than `stride × (height − 1) + row`.
+    pub fn new(
+        data: &'a [u8],
+        width: usize,
+        height: usize,
+        stride: usize,
+        format: PixelFormat,
+    ) -> Result<Self, TrackError> {
+        if width == 0 || height == 0 {
+            return Err(TrackError::InvalidFrame(format!(
+                "empty frame {width}x{height}"
+            )));
+        }
+        if width > MAX_FRAME_SIDE || height > MAX_FRAME_SIDE {
+            return Err(TrackError::InvalidFrame(format!(
+                "frame {width}x{height} exceeds the maximum side {MAX_FRAME_SIDE}"
+            )));
+        }
+        let row = width * format.bytes_per_pixel();
+        if stride < row {
+            return Err(TrackError::InvalidFrame(format!(
+                "stride {stride} is shorter than a row of {row} bytes"
+            )));
+        }
+        let need = stride * (height - 1) + row;
+        if data.len() < need {
+            return Err(TrackError::InvalidFrame(format!(
+                "buffer has {} bytes, {width}x{height} {} with stride {stride} needs {need}",
+                data.len(),
+                format.name()
+            )));
+        }
+        Ok(Self {
+            data,
+            width,
+            height,
+            stride,
+            format,
+        })
+    }
+
+    /// A tightly packed frame (`stride = width × bytes per pixel`).
+    ///
+    /// # Errors
+    /// As [`Frame::new`].
+    pub fn packed(
+        data: &'a [u8],
+        width: usize,
+        height: usize,
+        format: PixelFormat,
+    ) -> Result<Self, TrackError> {
+        Self::new(data, width, height, width * format.bytes_per_pixel(), format)
+    }
+
+    /// Width, pixels.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+    /// Height, pixels.
+    pub fn height(&self) -> usize {
+        self.height
+    }
+    /// Pixel format.
+    pub fn format(&self) -> PixelFormat {
+        self.format
+    }
+    /// Row stride, bytes.
+    pub fn stride(&self) -> usize {
+        self.stride
+    }
+    /// The raw bytes.
+    pub fn data(&self) -> &'a [u8] {
+        self.data
+    }
+    /// `WxH format`, for messages.
+    pub fn describe(&self) -> String {
+        format!("{}x{} {}", self.width, self.height, self.format.name())
+    }
+}
+
+/// A planar `f32` image (values 0..255), `planes × side × side`.
+#[derive(Debug, Clone, Default)]
+pub struct Patch {
+    /// Side length, pixels.
+    pub side: usize,
+    /// Number of colour planes (3 = RGB, 1 = grey).
+    pub planes: usize,
+    /// Plane-major data: `data[(p * side + r) * side + c]`.
+    pub data: Vec<f32>,
+}
+
+impl Patch {
+    /// A zeroed patch.
+    pub fn new(side: usize, planes: usize) -> Self {
+        Self {
+            side,
+            planes,
+            data: vec![0.0; side * side * planes],
+        }
+    }
+
+    /// One colour plane.
+    pub fn plane(&self, p: usize) -> &[f32] {
+        let n = self.side * self.side;
+        &self.data[p * n..(p + 1) * n]
+    }
+}
+
+/// Crops and resizes square regions of a frame; owns its scratch buffers.
+///
+/// Use [`Sampler::prepare`] once per frame and region of interest, then [`Sampler::sample`]
+/// for each scale inside it.
+#[derive(Debug, Default, Clone)]
+pub struct Sampler {
+    /// Box-averaged copy of the region, plane-major.
+    inter: Vec<f32>,
+    inter_w: usize,
+    inter_h: usize,
+    planes: usize,
+    /// Integer box-averaging factor of `inter`.
+    factor: usize,
+    /// Frame coordinate (pixel edge) of `inter`'s top-left corner.
+    ox: f32,
+    oy: f32,
+    rowsum: Vec<f32>,
+    col_off: Vec<usize>,
+}
+
+impl Sampler {
+    /// Prepares a region: a square of side `max_region` pixels around `center`, to be sampled
+    /// into patches of side about `out_side` (so regions down to `min_region` are anti-aliased
+    /// correctly).
+    pub fn prepare(
+        &mut self,
+        frame: &Frame<'_>,
+        center: Point2,
+        min_region: f32,
+        max_region: f32,
+        out_side: usize,
+    ) {
+        let ratio = min_region / out_side.max(1) as f32;
+        let factor = if ratio >= 2.0 { ratio.floor() as usize } else { 1 };
+        let f = factor as f32;
+        let half = max_region / 2.0 + 2.0 * f;
+        let x0 = ((center.x - half) / f).floor() * f;
+        let y0 = ((center.y - half) / f).floor() * f;
+        let w = (((center.x + half) - x0) / f).ceil().max(1.0) as usize;
+        let h = (((center.y + half) - y0) / f).ceil().max(1.0) as usize;
+        let planes = frame.format().planes();
+        self.factor = factor;
+        self.ox = x0;
+        self.oy = y0;
+        self.inter_w = w;
+        self.inter_h = h;
+        self.planes = planes;
+        self.inter.resize(w * h * planes, 0.0);
+        self.rowsum.resize(w * factor * planes, 0.0);
+
+        let bpp = frame.format().bytes_per_pixel();
+        let offs = frame.format().rgb_offsets();
+        let fw = frame.width() as isize;
+        let fh = frame.height() as isize;
+        let data = frame.data();
+        let stride = frame.stride();
+        let sx0 = x0 as isize;
+        let sy0 = y0 as isize;
+        let inv = 1.0 / (f * f);
+        // Source columns of the region, clamped (border replication), as byte offsets.
+        let wide = w * factor;
+        self.col_off.clear();
+        self.col_off
+            .extend((0..wide).map(|i| ((sx0 + i as isize).clamp(0, fw - 1) as usize) * bpp));
+        let col_off = &self.col_off;
+        for r in 0..h {
+            self.rowsum.iter_mut().for_each(|v| *v = 0.0);
+            for k in 0..factor {
+                let sy = (sy0 + (r * factor + k) as isize).clamp(0, fh - 1) as usize;
+                let row = &data[sy * stride..];
+                for p in 0..planes {
+                    let o = offs[p];
+                    let acc = &mut self.rowsum[p * wide..(p + 1) * wide];
+                    for (a, &c) in acc.iter_mut().zip(col_off.iter()) {
+                        *a += row[c + o] as f32;
+                    }
+                }
+            }
+            for p in 0..planes {
+                let acc = &self.rowsum[p * wide..(p + 1) * wide];
+                let out = &mut self.inter[(p * h + r) * w..(p * h + r + 1) * w];
+                if factor == 1 {
+                    out.copy_from_slice(acc);
+                } else {
+                    for (o, chunk) in out.iter_mut().zip(acc.chunks_exact(factor)) {
+                        *o = chunk.iter().sum::<f32>() * inv;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Samples a square of side `region` frame pixels centred on `center` (which must lie in
+    /// the prepared region) into `out` (side `out.side`, bilinear).
+    pub fn sample(&self, center: Point2, region: f32, out: &mut Patch) {
+        let side = out.side;
+        out.planes = self.planes;
+        out.data.resize(side * side * self.planes, 0.0);
+        let f = self.factor as f32;
+        let k = region / side as f32;
+        let w = self.inter_w;
+        let h = self.inter_h;
+        // Frame edge coordinate of output pixel centre j: center + (j + 0.5 - side/2) * k.
+        // Intermediate pixel-centre coordinate: (X - ox) / f - 0.5.
+        let map = |c: f32, o: f32, j: usize| (c + (j as f32 + 0.5 - side as f32 / 2.0) * k - o) / f - 0.5;
+        let col = |j: usize| {
+            let u = map(center.x, self.ox, j).clamp(0.0, (w - 1) as f32);
+            let i0 = (u.floor() as usize).min(w.saturating_sub(2));
+            (i0, (i0 + 1).min(w - 1), u - i0 as f32)
+        };
+        for p in 0..self.planes {
+            let src = &self.inter[p * w * h..(p + 1) * w * h];
+            for r in 0..side {
+                let v = map(center.y, self.oy, r).clamp(0.0, (h - 1) as f32);
+                let r0 = (v.floor() as usize).min(h.saturating_sub(2));
+                let r1 = (r0 + 1).min(h - 1);
+                let wy = v - r0 as f32;
+                let a = &src[r0 * w..r0 * w + w];
+                let b = &src[r1 * w..r1 * w + w];
+                let o = &mut out.data[(p * side + r) * side..(p * side + r + 1) * side];
+                for (j, o) in o.iter_mut().enumerate() {
+                    let (i0, i1, wx) = col(j);
+                    let top = a[i0] + (a[i1] - a[i0]) * wx;
+                    let bot = b[i0] + (b[i1] - b[i0]) * wx;
+                    *o = top + (bot - top) * wy;
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp(w: usize, h: usize) -> Vec<u8> {
+        (0..h).flat_map(|r| (0..w).map(move |c| ((r * 3 + c) % 256) as u8)).collect()
+    }
+
+    #[test]
+    fn frame_rejects_short_buffers_and_bad_strides() {
+        let d = vec![0u8; 10];
+        assert!(Frame::new(&d, 4, 4, 4, PixelFormat::Mono8).is_err());
+        assert!(Frame::new(&d, 4, 2, 3, PixelFormat::Mono8).is_err());
+        assert!(Frame::new(&d, 0, 2, 3, PixelFormat::Mono8).is_err());
+        assert!(Frame::new(&d, 4, 2, 5, PixelFormat::Mono8).is_ok());
+    }
+
+    #[test]
+    fn identity_sampling_reproduces_pixels() {
+        let (w, h) = (32, 24);
+        let d = ramp(w, h);
+        let f = Frame::packed(&d, w, h, PixelFormat::Mono8).unwrap();
+        let mut s = Sampler::default();
+        let c = Point2 { x: 16.0, y: 12.0 };
+        s.prepare(&f, c, 16.0, 16.0, 16);
+        let mut p = Patch::new(16, 1);
+        s.sample(c, 16.0, &mut p);
+        for r in 0..16 {
+            for col in 0..16 {
+                let want = d[(r + 4) * w + col + 8] as f32;
+                assert!((p.data[r * 16 + col] - want).abs() < 1e-3, "{r} {col}");
+            }
+        }
+    }
+
+    #[test]
+    fn outside_pixels_replicate_the_border() {
+        let (w, h) = (8, 8);
+        let d = ramp(w, h);
+        let f = Frame::packed(&d, w, h, PixelFormat::Mono8).unwrap();
+        let mut s = Sampler::default();
+        let c = Point2 { x: -20.0, y: -20.0 };
+        s.prepare(&f, c, 4.0, 4.0, 4);
+        let mut p = Patch::new(4, 1);
+        s.sample(c, 4.0, &mut p);
+        assert!(p.data.iter().all(|&v| (v - d[0] as f32).abs() < 1e-4));
+    }
+
+    #[test]
+    fn downscaling_averages_instead_of_aliasing() {
+        // A 1-pixel checkerboard downscaled 4x must come out as flat mid-grey.
+        let (w, h) = (64, 64);
+        let d: Vec<u8> = (0..h * w)
+            .map(|i| if (i / w + i % w) % 2 == 0 { 0 } else { 200 })
+            .collect();
+        let f = Frame::packed(&d, w, h, PixelFormat::Mono8).unwrap();
+        let mut s = Sampler::default();
+        let c = Point2 { x: 32.0, y: 32.0 };
+        s.prepare(&f, c, 32.0, 32.0, 8);
+        let mut p = Patch::new(8, 1);
+        s.sample(c, 32.0, &mut p);
+        for v in &p.data {
+            assert!((v - 100.0).abs() < 30.0, "{v}");
+        }
+    }
+
+    #[test]
+    fn bgr_is_reordered_to_rgb() {
+        let d = vec![10u8, 20, 30];
+        let f = Frame::packed(&d, 1, 1, PixelFormat::Bgr8).unwrap();
+        let mut s = Sampler::default();
+        let c = Point2 { x: 0.5, y: 0.5 };
+        s.prepare(&f, c, 1.0, 1.0, 1);
+        let mut p = Patch::new(1, 3);
+        s.sample(c, 1.0, &mut p);
+        assert_eq!(p.data, vec![30.0, 20.0, 10.0]);
+    }
+}

@@ -1,0 +1,525 @@
+//! The tracker: the one file that knows the order of the stages.
+//!
+//! [`Tracker`] is the interface every driver uses (the ROS node, the `bevt` tool, tests);
+//! [`BevtTracker`] implements ALGORITHM.md §§1–7 on top of the stage modules.
+
+use crate::config::TrackerSpec;
+use crate::error::TrackError;
+use crate::features::{FeatureExtractor, FeatureMap, Hog};
+use crate::fft::{fftshift, Fft2};
+use crate::filter::admm::{AdmmSolver, CropBox};
+use crate::filter::label::{gaussian_label, hann2d, label_sigma, reg_window};
+use crate::filter::peak::{subpixel_peak, NewtonScratch, Peak};
+use crate::filter::response::{fused_response, LayerSlot};
+use crate::geometry::{BBox, GridSize, Point2, Size2};
+use crate::image::{Frame, Patch, PixelFormat, Sampler};
+use crate::scale::{scale_factors, scale_limits};
+use crate::verify::{consensus_score, update_ideal, verdict, Verdict};
+use rustfft::num_complex::Complex32;
+use serde::{Deserialize, Serialize};
+
+/// Smallest accepted target side at initialisation, pixels.
+pub const MIN_TARGET_SIDE: f32 = 4.0;
+/// Smallest feature grid side, cells.
+const MIN_GRID: usize = 4;
+
+/// What the tracker reports for one frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TrackOutput {
+    /// Estimated box, pixels (0-based, see [`crate::geometry`]).
+    pub bbox: BBox,
+    /// Consensus score `C ∈ (0, 1]` of this frame's response with the ideal model.
+    pub consensus: f32,
+    /// Whether the filter learned from this frame.
+    pub learned: bool,
+    /// Peak value of the winning response.
+    pub peak: f32,
+    /// Current target scale relative to the initial box.
+    pub scale: f32,
+}
+
+/// The interface shared by every tracker driver.
+pub trait Tracker {
+    /// Starts tracking `bbox` on `frame`, discarding any previous track.
+    ///
+    /// # Errors
+    /// [`TrackError`] for an invalid frame or box; the tracker is then uninitialised.
+    fn init(&mut self, frame: &Frame<'_>, bbox: BBox) -> Result<(), TrackError>;
+
+    /// Tracks the target into `frame`.
+    ///
+    /// # Errors
+    /// [`TrackError::NotInitialized`] before `init`, [`TrackError::FrameMismatch`] when the
+    /// frame size or format changed; the track is kept unchanged on error.
+    fn update(&mut self, frame: &Frame<'_>) -> Result<TrackOutput, TrackError>;
+
+    /// Forgets the current track.
+    fn reset(&mut self);
+
+    /// True between a successful `init` and `reset`.
+    fn is_initialized(&self) -> bool;
+}
+
+/// Window geometry fixed at initialisation (ALGORITHM.md §1).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Geometry {
+    /// Feature cell size, pixels.
+    pub cell: usize,
+    /// Initial scale factor `s₀` (image pixels per base pixel).
+    pub s0: f32,
+    /// Target size in base pixels.
+    pub base_target: Size2,
+    /// Patch side, base pixels (`use_sz · cell`).
+    pub patch_side: usize,
+    /// Feature grid.
+    pub grid: GridSize,
+    /// Filter support, cells.
+    pub small_filter: GridSize,
+    /// Label σ, cells.
+    pub sigma: f32,
+}
+
+impl Geometry {
+    /// Computes the geometry for a target of `target` pixels.
+    ///
+    /// # Errors
+    /// [`TrackError::TargetTooSmall`] when the grid would be degenerate.
+    pub fn new(spec: &TrackerSpec, target: Size2, max_cell: usize, allow_smaller: bool) -> Result<Self, TrackError> {
+        let w = &spec.config.window;
+        let side = w.search_area_scale * (target.w * target.h).sqrt();
+        let mut cell = max_cell.max(1);
+        let area = side * side / (cell * cell) as f32;
+        let limit = w.cell_selection_thresh * w.filter_max_area;
+        if allow_smaller && area < limit {
+            let c = (side * side / limit).sqrt().ceil().max(1.0) as usize;
+            cell = cell.min(c);
+        }
+        let area = side * side / (cell * cell) as f32;
+        let s0 = if area > w.filter_max_area {
+            (area / w.filter_max_area).sqrt()
+        } else {
+            1.0
+        };
+        let base_target = Size2 {
+            w: target.w / s0,
+            h: target.h / s0,
+        };
+        let base_side = side / s0;
+        let n = (base_side / cell as f32 * w.padding).round() as usize;
+        if n < MIN_GRID {
+            return Err(TrackError::TargetTooSmall {
+                w: target.w,
+                h: target.h,
+                min: MIN_TARGET_SIDE,
+            });
+        }
+        let grid = GridSize { h: n, w: n };
+        let small_filter = GridSize {
+            h: ((base_target.h / cell as f32).floor() as usize).clamp(1, n),
+            w: ((base_target.w / cell as f32).floor() as usize).clamp(1, n),
+        };
+        Ok(Self {
+            cell,
+            s0,
+            base_target,
+            patch_side: n * cell,
+            grid,
+            small_filter,
+            sigma: label_sigma(base_target, cell, w.output_sigma_factor),
+        })
+    }
+}
+
+/// Per-scale buffers and extractor: one per scale, so scales can run in parallel.
+struct ScaleWorker {
+    patch: Patch,
+    feat: FeatureMap,
+    extractor: Box<dyn FeatureExtractor>,
+    fft: Fft2,
+    xf: Vec<Complex32>,
+    resp_f: Vec<Complex32>,
+    resp: Vec<f32>,
+    newton: NewtonScratch,
+    peak: Peak,
+}
+
+impl ScaleWorker {
+    fn new(g: &Geometry, extractor: Box<dyn FeatureExtractor>, planes: usize) -> Self {
+        let fft = Fft2::new(g.grid);
+        let bins = fft.spectrum_len();
+        let ch = extractor.channels();
+        Self {
+            patch: Patch::new(g.patch_side, planes),
+            feat: FeatureMap::new(g.grid, ch),
+            extractor,
+            fft,
+            xf: vec![Complex32::default(); ch * bins],
+            resp_f: vec![Complex32::default(); bins],
+            resp: vec![0.0; g.grid.len()],
+            newton: NewtonScratch::default(),
+            peak: Peak {
+                dy: 0.0,
+                dx: 0.0,
+                score: 0.0,
+            },
+        }
+    }
+
+    /// Patch at `center` of side `region` image pixels → windowed features → spectra `xf`.
+    fn features(&mut self, s: &Sampler, center: Point2, region: f32, cell: usize, window: &[f32]) -> Result<(), TrackError> {
+        s.sample(center, region, &mut self.patch);
+        self.extractor.extract(&self.patch, cell, &mut self.feat)?;
+        self.feat.apply_window(window);
+        let bins = self.fft.spectrum_len();
+        for d in 0..self.feat.channels {
+            self.fft.forward(self.feat.channel(d), &mut self.xf[d * bins..(d + 1) * bins]);
+        }
+        Ok(())
+    }
+
+    /// Features, fused response with filter `g_f`, and its sub-cell peak.
+    #[allow(clippy::too_many_arguments)]
+    fn detect(&mut self, s: &Sampler, center: Point2, region: f32, cell: usize, window: &[f32], g_f: &[Complex32], layers: &[LayerSlot], newton: usize) -> Result<(), TrackError> {
+        self.features(s, center, region, cell, window)?;
+        let bins = self.fft.spectrum_len();
+        fused_response(g_f, &self.xf, layers, bins, &mut self.resp_f);
+        self.fft.inverse(&self.resp_f, &mut self.resp);
+        let grid = self.fft.grid();
+        self.peak = subpixel_peak(&self.resp, &self.resp_f, grid, newton, &mut self.newton);
+        Ok(())
+    }
+}
+
+/// Everything that exists only while tracking.
+struct State {
+    geo: Geometry,
+    frame_w: usize,
+    frame_h: usize,
+    format: PixelFormat,
+    window: Vec<f32>,
+    yf: Vec<Complex32>,
+    layers: Vec<LayerSlot>,
+    solvers: Vec<AdmmSolver>,
+    fft: Fft2,
+    bins: usize,
+    model_xf: Vec<Complex32>,
+    g_f: Vec<Complex32>,
+    m_ideal: Vec<f32>,
+    m_curr: Vec<f32>,
+    resp_f: Vec<Complex32>,
+    resp: Vec<f32>,
+    workers: Vec<ScaleWorker>,
+    factors: Vec<f32>,
+    sampler: Sampler,
+    norm_scratch: Vec<f64>,
+    pos: Point2,
+    scale: f32,
+    min_scale: f32,
+    max_scale: f32,
+}
+
+impl State {
+    /// Trains all layers' filters on `model_xf`.
+    fn train(&mut self) {
+        let bins = self.bins;
+        for (layer, solver) in self.layers.iter().zip(self.solvers.iter_mut()) {
+            let r = layer.channels.start * bins..layer.channels.end * bins;
+            solver.train(&mut self.fft, &self.model_xf[r.clone()], &self.yf, &mut self.g_f[r]);
+        }
+    }
+
+    /// Training features at the current position and scale into worker 0.
+    fn training_sample(&mut self, frame: &Frame<'_>) -> Result<(), TrackError> {
+        let region = self.geo.patch_side as f32 * self.scale;
+        self.sampler.prepare(frame, self.pos, region, region, self.geo.patch_side);
+        let w = &mut self.workers[0];
+        w.features(&self.sampler, self.pos, region, self.geo.cell, &self.window)
+    }
+
+    /// Response of the current filter on its own appearance model, fftshifted, into `out`.
+    fn ideal_response(&mut self) {
+        fused_response(&self.g_f, &self.model_xf, &self.layers, self.bins, &mut self.resp_f);
+        self.fft.inverse(&self.resp_f, &mut self.resp);
+        fftshift(&self.resp, self.geo.grid, &mut self.m_ideal);
+    }
+}
+
+/// The BEVT tracker.
+pub struct BevtTracker {
+    spec: TrackerSpec,
+    extractor: Box<dyn FeatureExtractor>,
+    state: Option<Box<State>>,
+}
+
+impl std::fmt::Debug for BevtTracker {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BevtTracker")
+            .field("spec", &self.spec)
+            .field("initialized", &self.state.is_some())
+            .finish()
+    }
+}
+
+impl BevtTracker {
+    /// A tracker with the features `spec` names (HOG, optionally + grayscale).
+    pub fn new(spec: TrackerSpec) -> Self {
+        let f = &spec.config.features;
+        let extractor = Box::new(Hog::new(f.hog_cell_size, f.grayscale));
+        Self::with_extractor(spec, extractor)
+    }
+
+    /// A tracker with a custom feature extractor (e.g. CNN features).
+    pub fn with_extractor(spec: TrackerSpec, extractor: Box<dyn FeatureExtractor>) -> Self {
+        Self {
+            spec,
+            extractor,
+            state: None,
+        }
+    }
+
+    /// The specification the tracker was built with.
+    pub fn spec(&self) -> &TrackerSpec {
+        &self.spec
+    }
+
+    /// The window geometry of the current track.
+    pub fn geometry(&self) -> Option<&Geometry> {
+        self.state.as_ref().map(|s| &s.geo)
+    }
+
+    fn check_box(frame: &Frame<'_>, b: BBox) -> Result<(), TrackError> {
+        let bad = |reason| TrackError::InvalidBox {
+            x: b.x,
+            y: b.y,
+            w: b.w,
+            h: b.h,
+            reason,
+        };
+        if !b.is_finite() {
+            return Err(bad("a component is not finite"));
+        }
+        if b.w <= 0.0 || b.h <= 0.0 {
+            return Err(bad("width and height must be positive"));
+        }
+        if b.w < MIN_TARGET_SIDE || b.h < MIN_TARGET_SIDE {
+            return Err(TrackError::TargetTooSmall {
+                w: b.w,
+                h: b.h,
+                min: MIN_TARGET_SIDE,
+            });
+        }
+        let (fw, fh) = (frame.width(), frame.height());
+        if b.w > fw as f32 || b.h > fh as f32 {
+            return Err(TrackError::TargetLargerThanFrame {
+                w: b.w,
+                h: b.h,
+                frame_w: fw,
+                frame_h: fh,
+            });
+        }
+        if b.intersect(&BBox::new(0.0, 0.0, fw as f32, fh as f32)).area() <= 0.0 {
+            return Err(TrackError::BoxOutsideFrame {
+                x: b.x,
+                y: b.y,
+                w: b.w,
+                h: b.h,
+                frame_w: fw,
+                frame_h: fh,
+            });
+        }
+        Ok(())
+    }
+
+    fn build(&self, frame: &Frame<'_>, b: BBox) -> Result<Box<State>, TrackError> {
+        let spec = &self.spec;
+        let cfg = &spec.config;
+        let ex = &self.extractor;
+        let geo = Geometry::new(spec, b.size(), ex.cell_size(), ex.allows_smaller_cells())?;
+        let grid = geo.grid;
+        let mut fft = Fft2::new(grid);
+        let bins = fft.spectrum_len();
+        let mut y = vec![0.0; grid.len()];
+        gaussian_label(grid, geo.sigma, &mut y);
+        let mut yf = vec![Complex32::default(); bins];
+        fft.forward(&y, &mut yf);
+        let reg = reg_window(grid, geo.base_target, geo.cell, cfg.admm.reg_window_min, cfg.admm.reg_window_edge);
+        let crop = CropBox::centred(grid, geo.small_filter);
+        let mut layers = Vec::new();
+        let mut solvers = Vec::new();
+        let mut start = 0;
+        for l in ex.layers() {
+            layers.push(LayerSlot {
+                channels: start..start + l.channels,
+                weight: l.weight,
+            });
+            solvers.push(AdmmSolver::new(grid, bins, l.channels, &spec.admm, &reg, crop));
+            start += l.channels;
+        }
+        let channels = start;
+        let planes = frame.format().planes();
+        let factors = scale_factors(cfg.detection.number_of_scales, cfg.detection.scale_step);
+        let workers = factors
+            .iter()
+            .map(|_| ScaleWorker::new(&geo, ex.boxed_clone(), planes))
+            .collect();
+        let (min_scale, max_scale) = scale_limits(
+            geo.patch_side as f32,
+            (frame.width() as f32, frame.height() as f32),
+            (geo.base_target.w, geo.base_target.h),
+            cfg.detection.scale_step,
+        );
+        let scale = geo.s0;
+        Ok(Box::new(State {
+            window: hann2d(grid),
+            yf,
+            layers,
+            solvers,
+            fft,
+            bins,
+            model_xf: vec![Complex32::default(); channels * bins],
+            g_f: vec![Complex32::default(); channels * bins],
+            m_ideal: vec![0.0; grid.len()],
+            m_curr: vec![0.0; grid.len()],
+            resp_f: vec![Complex32::default(); bins],
+            resp: vec![0.0; grid.len()],
+            workers,
+            factors,
+            sampler: Sampler::default(),
+            norm_scratch: Vec::new(),
+            pos: b.center(),
+            scale,
+            min_scale: min_scale.min(scale),
+            max_scale: max_scale.max(scale),
+            frame_w: frame.width(),
+            frame_h: frame.height(),
+            format: frame.format(),
+            geo,
+        }))
+    }
+
+    fn output(st: &State, consensus: f32, learned: bool, peak: f32) -> TrackOutput {
+        let size = Size2 {
+            w: (st.geo.base_target.w * st.scale).floor().max(1.0),
+            h: (st.geo.base_target.h * st.scale).floor().max(1.0),
+        };
+        TrackOutput {
+            bbox: BBox::from_center(st.pos, size),
+            consensus,
+            learned,
+            peak,
+            scale: st.scale / st.geo.s0,
+        }
+    }
+
+    /// Runs detection on every scale (in parallel when configured).
+    fn detect_all(st: &mut State, threads: usize, newton: usize) -> Result<(), TrackError> {
+        let side = st.geo.patch_side as f32;
+        let (pos, scale, cell) = (st.pos, st.scale, st.geo.cell);
+        let State {
+            workers,
+            factors,
+            sampler,
+            window,
+            g_f,
+            layers,
+            ..
+        } = st;
+        let (sampler, window, g_f, layers) = (&*sampler, &*window, &*g_f, &*layers);
+        let run = |(w, f): (&mut ScaleWorker, &f32)| {
+            w.detect(sampler, pos, side * scale * f, cell, window, g_f, layers, newton)
+        };
+        #[cfg(feature = "parallel")]
+        if threads > 1 {
+            use rayon::prelude::*;
+            return workers.par_iter_mut().zip(factors.par_iter()).try_for_each(run);
+        }
+        let _ = threads;
+        workers.iter_mut().zip(factors.iter()).try_for_each(run)
+    }
+}
+
+impl Tracker for BevtTracker {
+    fn init(&mut self, frame: &Frame<'_>, bbox: BBox) -> Result<(), TrackError> {
+        self.state = None;
+        Self::check_box(frame, bbox)?;
+        let mut st = self.build(frame, bbox)?;
+        st.training_sample(frame)?;
+        st.model_xf.copy_from_slice(&st.workers[0].xf);
+        st.train();
+        st.ideal_response();
+        self.state = Some(st);
+        Ok(())
+    }
+
+    fn update(&mut self, frame: &Frame<'_>) -> Result<TrackOutput, TrackError> {
+        let cfg = &self.spec.config;
+        let st = self.state.as_mut().ok_or(TrackError::NotInitialized)?;
+        if frame.width() != st.frame_w || frame.height() != st.frame_h || frame.format() != st.format {
+            return Err(TrackError::FrameMismatch {
+                expected: format!("{}x{} {}", st.frame_w, st.frame_h, st.format.name()),
+                got: frame.describe(),
+            });
+        }
+        // Detection over all scales around the previous position.
+        let side = st.geo.patch_side as f32;
+        let fmin = st.factors.iter().copied().fold(f32::INFINITY, f32::min);
+        let fmax = st.factors.iter().copied().fold(0.0, f32::max);
+        st.sampler.prepare(frame, st.pos, side * st.scale * fmin, side * st.scale * fmax, st.geo.patch_side);
+        Self::detect_all(st, cfg.threads, cfg.detection.newton_iterations)?;
+        let (best, _) = st
+            .workers
+            .iter()
+            .enumerate()
+            .fold((0usize, f32::NEG_INFINITY), |acc, (i, w)| {
+                if w.peak.score > acc.1 {
+                    (i, w.peak.score)
+                } else {
+                    acc
+                }
+            });
+        let peak = st.workers[best].peak;
+        let factor = st.factors[best];
+        let step = st.geo.cell as f32 * st.scale * factor;
+        let new_pos = Point2 {
+            x: (st.pos.x + peak.dx * step).clamp(0.0, st.frame_w as f32),
+            y: (st.pos.y + peak.dy * step).clamp(0.0, st.frame_h as f32),
+        };
+        if new_pos.x.is_finite() && new_pos.y.is_finite() {
+            st.pos = new_pos;
+        }
+        st.scale = (st.scale * factor).clamp(st.min_scale, st.max_scale);
+
+        // Consensus verification on the winning scale's response.
+        fftshift(&st.workers[best].resp, st.geo.grid, &mut st.m_curr);
+        let vcfg = &cfg.verification;
+        let c = consensus_score(&st.m_ideal, &st.m_curr, st.geo.grid, vcfg.norm, &mut st.norm_scratch);
+        let v = if vcfg.enabled {
+            verdict(c, &self.spec.verify)
+        } else {
+            Verdict::Learn {
+                rate: cfg.learning.rate,
+            }
+        };
+        let learned = match v {
+            Verdict::Skip => false,
+            Verdict::Learn { rate } => {
+                update_ideal(&mut st.m_ideal, &st.m_curr, vcfg.response_model_rate);
+                st.training_sample(frame)?;
+                for (m, x) in st.model_xf.iter_mut().zip(&st.workers[0].xf) {
+                    *m = *m * (1.0 - rate) + x * rate;
+                }
+                st.train();
+                true
+            }
+        };
+        Ok(Self::output(st, c, learned, peak.score))
+    }
+
+    fn reset(&mut self) {
+        self.state = None;
+    }
+
+    fn is_initialized(&self) -> bool {
+        self.state.is_some()
+    }
+}
