@@ -28,6 +28,10 @@ pub struct FeatureConfig {
     pub hog_cell_size: usize,
     /// Append a grayscale channel (cell-mean luminance) to HOG.
     pub grayscale: bool,
+    /// Gain on every feature value (applied with the Hann window). It sets the balance of
+    /// the data term against the ADMM penalty μ, and so the scale of the responses that
+    /// consensus verification compares (1 = the reference).
+    pub gain: f32,
 }
 
 impl Default for FeatureConfig {
@@ -36,6 +40,7 @@ impl Default for FeatureConfig {
             kind: FeatureKind::Hog,
             hog_cell_size: 4,
             grayscale: true,
+            gain: 1.0,
         }
     }
 }
@@ -116,6 +121,9 @@ pub struct DetectionConfig {
     pub scale_step: f32,
     /// Newton iterations of the sub-cell peak (ref 50; stops early once converged).
     pub newton_iterations: usize,
+    /// Multiplies the peak of a scale `k` steps from the current one by `penalty^k` before
+    /// the scales compete (1 = the reference: no penalty). Damps scale jitter from noise.
+    pub scale_penalty: f32,
 }
 
 impl Default for DetectionConfig {
@@ -124,6 +132,7 @@ impl Default for DetectionConfig {
             number_of_scales: 5,
             scale_step: 1.01,
             newton_iterations: 50,
+            scale_penalty: 1.0,
         }
     }
 }
@@ -221,7 +230,12 @@ pub struct TrackerSpec {
     pub verify: VerifyParams,
 }
 
-fn check(ok: bool, field: &'static str, value: impl ToString, expected: &'static str) -> Result<(), ConfigError> {
+fn check(
+    ok: bool,
+    field: &'static str,
+    value: impl ToString,
+    expected: &'static str,
+) -> Result<(), ConfigError> {
     if ok {
         Ok(())
     } else {
@@ -244,39 +258,152 @@ impl TrackerConfig {
     /// [`ConfigError`] naming the first offending field.
     pub fn validate(&self) -> Result<TrackerSpec, ConfigError> {
         let f = &self.features;
-        check((1..=16).contains(&f.hog_cell_size), "features.hog_cell_size", f.hog_cell_size, "1..=16 pixels")?;
+        check(
+            (1..=16).contains(&f.hog_cell_size),
+            "features.hog_cell_size",
+            f.hog_cell_size,
+            "1..=16 pixels",
+        )?;
+        check(
+            f.gain.is_finite() && f.gain > 0.0 && f.gain <= 1e4,
+            "features.gain",
+            f.gain,
+            "(0, 1e4]",
+        )?;
         let w = &self.window;
-        check(finite_pos(w.search_area_scale) && w.search_area_scale >= 1.0, "window.search_area_scale", w.search_area_scale, ">= 1")?;
-        check(finite_pos(w.padding) && w.padding >= 1.0, "window.padding", w.padding, ">= 1")?;
-        check(finite_pos(w.filter_max_area) && w.filter_max_area >= 16.0 && w.filter_max_area <= 65536.0, "window.filter_max_area", w.filter_max_area, "16..=65536 cells²")?;
-        check(finite_pos(w.cell_selection_thresh) && w.cell_selection_thresh <= 1.0, "window.cell_selection_thresh", w.cell_selection_thresh, "(0, 1]")?;
-        check(finite_pos(w.output_sigma_factor), "window.output_sigma_factor", w.output_sigma_factor, "> 0")?;
+        check(
+            finite_pos(w.search_area_scale) && w.search_area_scale >= 1.0,
+            "window.search_area_scale",
+            w.search_area_scale,
+            ">= 1",
+        )?;
+        check(
+            finite_pos(w.padding) && w.padding >= 1.0,
+            "window.padding",
+            w.padding,
+            ">= 1",
+        )?;
+        check(
+            finite_pos(w.filter_max_area)
+                && w.filter_max_area >= 16.0
+                && w.filter_max_area <= 65536.0,
+            "window.filter_max_area",
+            w.filter_max_area,
+            "16..=65536 cells²",
+        )?;
+        check(
+            finite_pos(w.cell_selection_thresh) && w.cell_selection_thresh <= 1.0,
+            "window.cell_selection_thresh",
+            w.cell_selection_thresh,
+            "(0, 1]",
+        )?;
+        check(
+            finite_pos(w.output_sigma_factor),
+            "window.output_sigma_factor",
+            w.output_sigma_factor,
+            "> 0",
+        )?;
         let a = &self.admm;
-        check((1..=100).contains(&a.iterations), "admm.iterations", a.iterations, "1..=100")?;
+        check(
+            (1..=100).contains(&a.iterations),
+            "admm.iterations",
+            a.iterations,
+            "1..=100",
+        )?;
         check(finite_pos(a.mu_init), "admm.mu_init", a.mu_init, "> 0")?;
-        check(a.beta.is_finite() && a.beta >= 1.0, "admm.beta", a.beta, ">= 1")?;
-        check(finite_pos(a.mu_max) && a.mu_max >= a.mu_init, "admm.mu_max", a.mu_max, ">= admm.mu_init")?;
-        check(a.lambda.is_finite() && a.lambda >= 0.0, "admm.lambda", a.lambda, ">= 0")?;
-        check(a.reg_window_min.is_finite() && a.reg_window_min >= 0.0, "admm.reg_window_min", a.reg_window_min, ">= 0")?;
-        check(a.reg_window_edge.is_finite() && a.reg_window_edge >= a.reg_window_min, "admm.reg_window_edge", a.reg_window_edge, ">= admm.reg_window_min")?;
+        check(
+            a.beta.is_finite() && a.beta >= 1.0,
+            "admm.beta",
+            a.beta,
+            ">= 1",
+        )?;
+        check(
+            finite_pos(a.mu_max) && a.mu_max >= a.mu_init,
+            "admm.mu_max",
+            a.mu_max,
+            ">= admm.mu_init",
+        )?;
+        check(
+            a.lambda.is_finite() && a.lambda >= 0.0,
+            "admm.lambda",
+            a.lambda,
+            ">= 0",
+        )?;
+        check(
+            a.reg_window_min.is_finite() && a.reg_window_min >= 0.0,
+            "admm.reg_window_min",
+            a.reg_window_min,
+            ">= 0",
+        )?;
+        check(
+            a.reg_window_edge.is_finite() && a.reg_window_edge >= a.reg_window_min,
+            "admm.reg_window_edge",
+            a.reg_window_edge,
+            ">= admm.reg_window_min",
+        )?;
         let d = &self.detection;
-        check(d.number_of_scales >= 1 && d.number_of_scales <= 33, "detection.number_of_scales", d.number_of_scales, "1..=33")?;
-        check(d.scale_step.is_finite() && d.scale_step > 1.0 && d.scale_step < 2.0, "detection.scale_step", d.scale_step, "(1, 2)")?;
-        check(d.newton_iterations <= 1000, "detection.newton_iterations", d.newton_iterations, "0..=1000")?;
+        check(
+            d.number_of_scales >= 1 && d.number_of_scales <= 33,
+            "detection.number_of_scales",
+            d.number_of_scales,
+            "1..=33",
+        )?;
+        check(
+            d.scale_step.is_finite() && d.scale_step > 1.0 && d.scale_step < 2.0,
+            "detection.scale_step",
+            d.scale_step,
+            "(1, 2)",
+        )?;
+        check(
+            d.newton_iterations <= 1000,
+            "detection.newton_iterations",
+            d.newton_iterations,
+            "0..=1000",
+        )?;
         let l = &self.learning;
-        check(l.rate.is_finite() && (0.0..=1.0).contains(&l.rate), "learning.rate", l.rate, "[0, 1]")?;
-        check(l.reinforced_rate.is_finite() && (0.0..=1.0).contains(&l.reinforced_rate), "learning.reinforced_rate", l.reinforced_rate, "[0, 1]")?;
+        check(
+            l.rate.is_finite() && (0.0..=1.0).contains(&l.rate),
+            "learning.rate",
+            l.rate,
+            "[0, 1]",
+        )?;
+        check(
+            l.reinforced_rate.is_finite() && (0.0..=1.0).contains(&l.reinforced_rate),
+            "learning.reinforced_rate",
+            l.reinforced_rate,
+            "[0, 1]",
+        )?;
         let v = &self.verification;
-        check(v.threshold_low.is_finite() && (0.0..=1.0).contains(&v.threshold_low), "verification.threshold_low", v.threshold_low, "[0, 1]")?;
-        check(v.threshold_high.is_finite() && (0.0..=1.0).contains(&v.threshold_high), "verification.threshold_high", v.threshold_high, "[0, 1]")?;
+        check(
+            v.threshold_low.is_finite() && (0.0..=1.0).contains(&v.threshold_low),
+            "verification.threshold_low",
+            v.threshold_low,
+            "[0, 1]",
+        )?;
+        check(
+            v.threshold_high.is_finite() && (0.0..=1.0).contains(&v.threshold_high),
+            "verification.threshold_high",
+            v.threshold_high,
+            "[0, 1]",
+        )?;
         if v.threshold_high < v.threshold_low {
             return Err(ConfigError::Inconsistent(format!(
                 "verification.threshold_high ({}) is below threshold_low ({})",
                 v.threshold_high, v.threshold_low
             )));
         }
-        check(v.response_model_rate.is_finite() && (0.0..=1.0).contains(&v.response_model_rate), "verification.response_model_rate", v.response_model_rate, "[0, 1]")?;
-        check((1..=256).contains(&self.threads), "threads", self.threads, "1..=256")?;
+        check(
+            v.response_model_rate.is_finite() && (0.0..=1.0).contains(&v.response_model_rate),
+            "verification.response_model_rate",
+            v.response_model_rate,
+            "[0, 1]",
+        )?;
+        check(
+            (1..=256).contains(&self.threads),
+            "threads",
+            self.threads,
+            "1..=256",
+        )?;
         Ok(TrackerSpec {
             config: self.clone(),
             admm: AdmmParams {

@@ -43,10 +43,8 @@ impl Fft2 {
         let col_fwd = cp.plan_fft_forward(grid.h);
         let col_inv = cp.plan_fft_inverse(grid.h);
         let wc = grid.w / 2 + 1;
-        let scratch_r = vec![
-            Complex32::default();
-            r2c.get_scratch_len().max(c2r.get_scratch_len())
-        ];
+        let scratch_r =
+            vec![Complex32::default(); r2c.get_scratch_len().max(c2r.get_scratch_len())];
         let scratch_c = vec![
             Complex32::default();
             col_fwd
@@ -183,7 +181,8 @@ mod tests {
         let mut acc = (0.0f64, 0.0f64);
         for r in 0..h {
             for c in 0..w {
-                let ph = -2.0 * std::f64::consts::PI
+                let ph = -2.0
+                    * std::f64::consts::PI
                     * ((ky * r) as f64 / h as f64 + (kx * c) as f64 / w as f64);
                 acc.0 += x[r * w + c] as f64 * ph.cos();
                 acc.1 += x[r * w + c] as f64 * ph.sin();

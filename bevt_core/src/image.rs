@@ -134,7 +134,13 @@ impl<'a> Frame<'a> {
         height: usize,
         format: PixelFormat,
     ) -> Result<Self, TrackError> {
-        Self::new(data, width, height, width * format.bytes_per_pixel(), format)
+        Self::new(
+            data,
+            width,
+            height,
+            width * format.bytes_per_pixel(),
+            format,
+        )
     }
 
     /// Width, pixels.
@@ -172,6 +178,10 @@ pub struct Patch {
     pub planes: usize,
     /// Plane-major data: `data[(p * side + r) * side + c]`.
     pub data: Vec<f32>,
+    /// Sampling scratch: per output column and row, the resampling taps.
+    cols: Vec<Taps>,
+    rows: Vec<Taps>,
+    tmp: Vec<f32>,
 }
 
 impl Patch {
@@ -181,6 +191,9 @@ impl Patch {
             side,
             planes,
             data: vec![0.0; side * side * planes],
+            cols: Vec::with_capacity(side),
+            rows: Vec::with_capacity(side),
+            tmp: Vec::new(),
         }
     }
 
@@ -224,7 +237,11 @@ impl Sampler {
         out_side: usize,
     ) {
         let ratio = min_region / out_side.max(1) as f32;
-        let factor = if ratio >= 2.0 { ratio.floor() as usize } else { 1 };
+        let factor = if ratio >= 2.0 {
+            ratio.floor() as usize
+        } else {
+            1
+        };
         let f = factor as f32;
         let half = max_region / 2.0 + 2.0 * f;
         let x0 = ((center.x - half) / f).floor() * f;
@@ -283,42 +300,142 @@ impl Sampler {
         }
     }
 
+    /// True when a square of side `region` around `center` lies inside the prepared
+    /// intermediate and the prepared anti-aliasing factor suits it, so [`Self::sample`] can
+    /// be used without another [`Self::prepare`].
+    pub fn covers(&self, center: Point2, region: f32, out_side: usize) -> bool {
+        if self.inter.is_empty() {
+            return false;
+        }
+        let ratio = region / out_side.max(1) as f32;
+        let factor = if ratio >= 2.0 {
+            ratio.floor() as usize
+        } else {
+            1
+        };
+        let f = self.factor as f32;
+        let half = region / 2.0 + f;
+        factor == self.factor
+            && center.x - half >= self.ox
+            && center.y - half >= self.oy
+            && center.x + half <= self.ox + self.inter_w as f32 * f
+            && center.y + half <= self.oy + self.inter_h as f32 * f
+    }
+
     /// Samples a square of side `region` frame pixels centred on `center` (which must lie in
-    /// the prepared region) into `out` (side `out.side`, bilinear).
+    /// the prepared region) into `out` (side `out.side`).
+    ///
+    /// Downscaling averages each output pixel's footprint (area resampling, so every scale
+    /// is low-pass filtered alike and none aliases more than another); upscaling is
+    /// bilinear.
     pub fn sample(&self, center: Point2, region: f32, out: &mut Patch) {
         let side = out.side;
         out.planes = self.planes;
         out.data.resize(side * side * self.planes, 0.0);
         let f = self.factor as f32;
         let k = region / side as f32;
-        let w = self.inter_w;
-        let h = self.inter_h;
-        // Frame edge coordinate of output pixel centre j: center + (j + 0.5 - side/2) * k.
-        // Intermediate pixel-centre coordinate: (X - ox) / f - 0.5.
-        let map = |c: f32, o: f32, j: usize| (c + (j as f32 + 0.5 - side as f32 / 2.0) * k - o) / f - 0.5;
-        let col = |j: usize| {
-            let u = map(center.x, self.ox, j).clamp(0.0, (w - 1) as f32);
-            let i0 = (u.floor() as usize).min(w.saturating_sub(2));
-            (i0, (i0 + 1).min(w - 1), u - i0 as f32)
-        };
+        let (w, h) = (self.inter_w, self.inter_h);
+        // Output pixel j's centre in frame edge coordinates: center + (j + 0.5 − side/2)·k;
+        // in intermediate pixel-centre coordinates: (X − origin)/f − 0.5. Footprint width k/f.
+        let width = k / f;
+        let map =
+            |c: f32, o: f32, j: usize| (c + (j as f32 + 0.5 - side as f32 / 2.0) * k - o) / f - 0.5;
+        out.cols.clear();
+        for j in 0..side {
+            out.cols
+                .push(Taps::new(map(center.x, self.ox, j), width, w));
+        }
+        out.rows.clear();
+        for r in 0..side {
+            out.rows
+                .push(Taps::new(map(center.y, self.oy, r), width, h));
+        }
+        let cmin = out.cols.iter().map(|t| t.start).min().unwrap_or(0);
+        let cmax = out
+            .cols
+            .iter()
+            .map(|t| t.start + t.len)
+            .max()
+            .unwrap_or(0)
+            .min(w);
+        out.tmp.resize(w, 0.0);
         for p in 0..self.planes {
             let src = &self.inter[p * w * h..(p + 1) * w * h];
-            for r in 0..side {
-                let v = map(center.y, self.oy, r).clamp(0.0, (h - 1) as f32);
-                let r0 = (v.floor() as usize).min(h.saturating_sub(2));
-                let r1 = (r0 + 1).min(h - 1);
-                let wy = v - r0 as f32;
-                let a = &src[r0 * w..r0 * w + w];
-                let b = &src[r1 * w..r1 * w + w];
+            for (r, rt) in out.rows.iter().enumerate() {
+                // Vertical pass into one row, then the horizontal pass.
+                let tmp = &mut out.tmp[cmin..cmax];
+                tmp.iter_mut().for_each(|v| *v = 0.0);
+                for t in 0..rt.len {
+                    let wt = rt.w[t];
+                    let row = &src[(rt.start + t) * w + cmin..(rt.start + t) * w + cmax];
+                    for (a, b) in tmp.iter_mut().zip(row) {
+                        *a += wt * b;
+                    }
+                }
                 let o = &mut out.data[(p * side + r) * side..(p * side + r + 1) * side];
-                for (j, o) in o.iter_mut().enumerate() {
-                    let (i0, i1, wx) = col(j);
-                    let top = a[i0] + (a[i1] - a[i0]) * wx;
-                    let bot = b[i0] + (b[i1] - b[i0]) * wx;
-                    *o = top + (bot - top) * wy;
+                for (o, ct) in o.iter_mut().zip(out.cols.iter()) {
+                    let src = &out.tmp[ct.start..ct.start + ct.len];
+                    *o = src.iter().zip(&ct.w).map(|(a, b)| a * b).sum();
                 }
             }
         }
+    }
+}
+
+/// Most source pixels one output pixel reads along one axis.
+const MAX_TAPS: usize = 6;
+
+/// Resampling weights of one output pixel along one axis.
+#[derive(Debug, Clone, Copy)]
+struct Taps {
+    start: usize,
+    len: usize,
+    w: [f32; MAX_TAPS],
+}
+
+impl Taps {
+    /// Weights for an output pixel centred at source coordinate `u` (pixel centres at
+    /// integers) with footprint `width` source pixels, over `n` source pixels; indices
+    /// outside `0..n` replicate the border.
+    fn new(u: f32, width: f32, n: usize) -> Self {
+        let mut t = Taps {
+            start: 0,
+            len: 0,
+            w: [0.0; MAX_TAPS],
+        };
+        let last = n.saturating_sub(1) as isize;
+        // Indices arrive in increasing order, so clamped ones fold onto the first/last tap.
+        let push = |i: isize, wt: f32, t: &mut Taps| {
+            let i = i.clamp(0, last) as usize;
+            if t.len == 0 {
+                t.start = i;
+            }
+            let slot = i - t.start;
+            if slot < MAX_TAPS {
+                t.w[slot] += wt;
+                t.len = t.len.max(slot + 1);
+            }
+        };
+        if width <= 1.0 {
+            let u = u.clamp(0.0, last as f32);
+            let i0 = u.floor();
+            let a = u - i0;
+            push(i0 as isize, 1.0 - a, &mut t);
+            push(i0 as isize + 1, a, &mut t);
+        } else {
+            let (lo, hi) = (u - width / 2.0, u + width / 2.0);
+            let inv = 1.0 / width;
+            let first = (lo + 0.5).floor() as isize;
+            let last_i = (hi + 0.5).ceil() as isize - 1;
+            for i in first..=last_i {
+                let a = (i as f32 - 0.5).max(lo);
+                let b = (i as f32 + 0.5).min(hi);
+                if b > a {
+                    push(i, (b - a) * inv, &mut t);
+                }
+            }
+        }
+        t
     }
 }
 
@@ -327,7 +444,9 @@ mod tests {
     use super::*;
 
     fn ramp(w: usize, h: usize) -> Vec<u8> {
-        (0..h).flat_map(|r| (0..w).map(move |c| ((r * 3 + c) % 256) as u8)).collect()
+        (0..h)
+            .flat_map(|r| (0..w).map(move |c| ((r * 3 + c) % 256) as u8))
+            .collect()
     }
 
     #[test]
@@ -386,6 +505,37 @@ mod tests {
         for v in &p.data {
             assert!((v - 100.0).abs() < 30.0, "{v}");
         }
+    }
+
+    #[test]
+    fn area_taps_sum_to_one_and_replicate_borders() {
+        for (u, width) in [
+            (5.3f32, 1.37f32),
+            (0.2, 1.9),
+            (-3.0, 1.5),
+            (9.8, 2.08),
+            (4.0, 0.7),
+        ] {
+            let t = Taps::new(u, width, 10);
+            let s: f32 = t.w[..t.len].iter().sum();
+            assert!((s - 1.0).abs() < 1e-5, "{u} {width}: {t:?}");
+            assert!(t.start + t.len <= 10, "{t:?}");
+        }
+    }
+
+    #[test]
+    fn downscaling_by_a_fraction_preserves_the_mean() {
+        let (w, h) = (64, 64);
+        let d: Vec<u8> = (0..h * w).map(|i| ((i * 37) % 251) as u8).collect();
+        let mean_in = d.iter().map(|&v| v as f32).sum::<f32>() / d.len() as f32;
+        let f = Frame::packed(&d, w, h, PixelFormat::Mono8).unwrap();
+        let mut s = Sampler::default();
+        let c = Point2 { x: 32.0, y: 32.0 };
+        s.prepare(&f, c, 64.0, 64.0, 47);
+        let mut p = Patch::new(47, 1);
+        s.sample(c, 64.0, &mut p);
+        let mean_out = p.data.iter().sum::<f32>() / p.data.len() as f32;
+        assert!((mean_in - mean_out).abs() < 2.0, "{mean_in} {mean_out}");
     }
 
     #[test]

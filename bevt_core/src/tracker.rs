@@ -20,6 +20,9 @@ use serde::{Deserialize, Serialize};
 
 /// Smallest accepted target side at initialisation, pixels.
 pub const MIN_TARGET_SIDE: f32 = 4.0;
+/// The detection region is prepared this much larger than the largest scale so the
+/// training sample (new position and scale) usually falls inside it.
+const TRAIN_REUSE_MARGIN: f32 = 1.15;
 /// Smallest feature grid side, cells.
 const MIN_GRID: usize = 4;
 
@@ -84,7 +87,12 @@ impl Geometry {
     ///
     /// # Errors
     /// [`TrackError::TargetTooSmall`] when the grid would be degenerate.
-    pub fn new(spec: &TrackerSpec, target: Size2, max_cell: usize, allow_smaller: bool) -> Result<Self, TrackError> {
+    pub fn new(
+        spec: &TrackerSpec,
+        target: Size2,
+        max_cell: usize,
+        allow_smaller: bool,
+    ) -> Result<Self, TrackError> {
         let w = &spec.config.window;
         let side = w.search_area_scale * (target.w * target.h).sqrt();
         let mut cell = max_cell.max(1);
@@ -166,20 +174,38 @@ impl ScaleWorker {
     }
 
     /// Patch at `center` of side `region` image pixels → windowed features → spectra `xf`.
-    fn features(&mut self, s: &Sampler, center: Point2, region: f32, cell: usize, window: &[f32]) -> Result<(), TrackError> {
+    fn features(
+        &mut self,
+        s: &Sampler,
+        center: Point2,
+        region: f32,
+        cell: usize,
+        window: &[f32],
+    ) -> Result<(), TrackError> {
         s.sample(center, region, &mut self.patch);
         self.extractor.extract(&self.patch, cell, &mut self.feat)?;
         self.feat.apply_window(window);
         let bins = self.fft.spectrum_len();
         for d in 0..self.feat.channels {
-            self.fft.forward(self.feat.channel(d), &mut self.xf[d * bins..(d + 1) * bins]);
+            self.fft
+                .forward(self.feat.channel(d), &mut self.xf[d * bins..(d + 1) * bins]);
         }
         Ok(())
     }
 
     /// Features, fused response with filter `g_f`, and its sub-cell peak.
     #[allow(clippy::too_many_arguments)]
-    fn detect(&mut self, s: &Sampler, center: Point2, region: f32, cell: usize, window: &[f32], g_f: &[Complex32], layers: &[LayerSlot], newton: usize) -> Result<(), TrackError> {
+    fn detect(
+        &mut self,
+        s: &Sampler,
+        center: Point2,
+        region: f32,
+        cell: usize,
+        window: &[f32],
+        g_f: &[Complex32],
+        layers: &[LayerSlot],
+        newton: usize,
+    ) -> Result<(), TrackError> {
         self.features(s, center, region, cell, window)?;
         let bins = self.fft.spectrum_len();
         fused_response(g_f, &self.xf, layers, bins, &mut self.resp_f);
@@ -210,6 +236,9 @@ struct State {
     resp: Vec<f32>,
     workers: Vec<ScaleWorker>,
     factors: Vec<f32>,
+    /// `scale_penalty^|exponent|` per scale: multiplies each scale's peak before the
+    /// arg-max (1 everywhere with the reference setting).
+    scale_weights: Vec<f32>,
     sampler: Sampler,
     norm_scratch: Vec<f64>,
     pos: Point2,
@@ -224,21 +253,33 @@ impl State {
         let bins = self.bins;
         for (layer, solver) in self.layers.iter().zip(self.solvers.iter_mut()) {
             let r = layer.channels.start * bins..layer.channels.end * bins;
-            solver.train(&mut self.fft, &self.model_xf[r.clone()], &self.yf, &mut self.g_f[r]);
+            solver.train(
+                &mut self.fft,
+                &self.model_xf[r.clone()],
+                &self.yf,
+                &mut self.g_f[r],
+            );
         }
     }
 
     /// Training features at the current position and scale into worker 0.
     fn training_sample(&mut self, frame: &Frame<'_>) -> Result<(), TrackError> {
         let region = self.geo.patch_side as f32 * self.scale;
-        self.sampler.prepare(frame, self.pos, region, region, self.geo.patch_side);
+        self.sampler
+            .prepare(frame, self.pos, region, region, self.geo.patch_side);
         let w = &mut self.workers[0];
         w.features(&self.sampler, self.pos, region, self.geo.cell, &self.window)
     }
 
     /// Response of the current filter on its own appearance model, fftshifted, into `out`.
     fn ideal_response(&mut self) {
-        fused_response(&self.g_f, &self.model_xf, &self.layers, self.bins, &mut self.resp_f);
+        fused_response(
+            &self.g_f,
+            &self.model_xf,
+            &self.layers,
+            self.bins,
+            &mut self.resp_f,
+        );
         self.fft.inverse(&self.resp_f, &mut self.resp);
         fftshift(&self.resp, self.geo.grid, &mut self.m_ideal);
     }
@@ -317,7 +358,10 @@ impl BevtTracker {
                 frame_h: fh,
             });
         }
-        if b.intersect(&BBox::new(0.0, 0.0, fw as f32, fh as f32)).area() <= 0.0 {
+        if b.intersect(&BBox::new(0.0, 0.0, fw as f32, fh as f32))
+            .area()
+            <= 0.0
+        {
             return Err(TrackError::BoxOutsideFrame {
                 x: b.x,
                 y: b.y,
@@ -342,7 +386,13 @@ impl BevtTracker {
         gaussian_label(grid, geo.sigma, &mut y);
         let mut yf = vec![Complex32::default(); bins];
         fft.forward(&y, &mut yf);
-        let reg = reg_window(grid, geo.base_target, geo.cell, cfg.admm.reg_window_min, cfg.admm.reg_window_edge);
+        let reg = reg_window(
+            grid,
+            geo.base_target,
+            geo.cell,
+            cfg.admm.reg_window_min,
+            cfg.admm.reg_window_edge,
+        );
         let crop = CropBox::centred(grid, geo.small_filter);
         let mut layers = Vec::new();
         let mut solvers = Vec::new();
@@ -352,7 +402,9 @@ impl BevtTracker {
                 channels: start..start + l.channels,
                 weight: l.weight,
             });
-            solvers.push(AdmmSolver::new(grid, bins, l.channels, &spec.admm, &reg, crop));
+            solvers.push(AdmmSolver::new(
+                grid, bins, l.channels, &spec.admm, &reg, crop,
+            ));
             start += l.channels;
         }
         let channels = start;
@@ -370,7 +422,10 @@ impl BevtTracker {
         );
         let scale = geo.s0;
         Ok(Box::new(State {
-            window: hann2d(grid),
+            window: hann2d(grid)
+                .into_iter()
+                .map(|v| v * cfg.features.gain)
+                .collect(),
             yf,
             layers,
             solvers,
@@ -383,6 +438,13 @@ impl BevtTracker {
             resp_f: vec![Complex32::default(); bins],
             resp: vec![0.0; grid.len()],
             workers,
+            scale_weights: factors
+                .iter()
+                .map(|f| {
+                    let e = (f.ln() / cfg.detection.scale_step.ln()).round().abs() as i32;
+                    cfg.detection.scale_penalty.powi(e)
+                })
+                .collect(),
             factors,
             sampler: Sampler::default(),
             norm_scratch: Vec::new(),
@@ -426,12 +488,24 @@ impl BevtTracker {
         } = st;
         let (sampler, window, g_f, layers) = (&*sampler, &*window, &*g_f, &*layers);
         let run = |(w, f): (&mut ScaleWorker, &f32)| {
-            w.detect(sampler, pos, side * scale * f, cell, window, g_f, layers, newton)
+            w.detect(
+                sampler,
+                pos,
+                side * scale * f,
+                cell,
+                window,
+                g_f,
+                layers,
+                newton,
+            )
         };
         #[cfg(feature = "parallel")]
         if threads > 1 {
             use rayon::prelude::*;
-            return workers.par_iter_mut().zip(factors.par_iter()).try_for_each(run);
+            return workers
+                .par_iter_mut()
+                .zip(factors.par_iter())
+                .try_for_each(run);
         }
         let _ = threads;
         workers.iter_mut().zip(factors.iter()).try_for_each(run)
@@ -454,7 +528,10 @@ impl Tracker for BevtTracker {
     fn update(&mut self, frame: &Frame<'_>) -> Result<TrackOutput, TrackError> {
         let cfg = &self.spec.config;
         let st = self.state.as_mut().ok_or(TrackError::NotInitialized)?;
-        if frame.width() != st.frame_w || frame.height() != st.frame_h || frame.format() != st.format {
+        if frame.width() != st.frame_w
+            || frame.height() != st.frame_h
+            || frame.format() != st.format
+        {
             return Err(TrackError::FrameMismatch {
                 expected: format!("{}x{} {}", st.frame_w, st.frame_h, st.format.name()),
                 got: frame.describe(),
@@ -464,19 +541,27 @@ impl Tracker for BevtTracker {
         let side = st.geo.patch_side as f32;
         let fmin = st.factors.iter().copied().fold(f32::INFINITY, f32::min);
         let fmax = st.factors.iter().copied().fold(0.0, f32::max);
-        st.sampler.prepare(frame, st.pos, side * st.scale * fmin, side * st.scale * fmax, st.geo.patch_side);
+        // A margin around the largest scale lets the training sample reuse this region.
+        st.sampler.prepare(
+            frame,
+            st.pos,
+            side * st.scale * fmin,
+            side * st.scale * fmax * TRAIN_REUSE_MARGIN,
+            st.geo.patch_side,
+        );
         Self::detect_all(st, cfg.threads, cfg.detection.newton_iterations)?;
-        let (best, _) = st
-            .workers
-            .iter()
-            .enumerate()
-            .fold((0usize, f32::NEG_INFINITY), |acc, (i, w)| {
-                if w.peak.score > acc.1 {
-                    (i, w.peak.score)
-                } else {
-                    acc
-                }
-            });
+        let (best, _) =
+            st.workers
+                .iter()
+                .enumerate()
+                .fold((0usize, f32::NEG_INFINITY), |acc, (i, w)| {
+                    let score = w.peak.score * st.scale_weights[i];
+                    if score > acc.1 {
+                        (i, score)
+                    } else {
+                        acc
+                    }
+                });
         let peak = st.workers[best].peak;
         let factor = st.factors[best];
         let step = st.geo.cell as f32 * st.scale * factor;
@@ -492,7 +577,13 @@ impl Tracker for BevtTracker {
         // Consensus verification on the winning scale's response.
         fftshift(&st.workers[best].resp, st.geo.grid, &mut st.m_curr);
         let vcfg = &cfg.verification;
-        let c = consensus_score(&st.m_ideal, &st.m_curr, st.geo.grid, vcfg.norm, &mut st.norm_scratch);
+        let c = consensus_score(
+            &st.m_ideal,
+            &st.m_curr,
+            st.geo.grid,
+            vcfg.norm,
+            &mut st.norm_scratch,
+        );
         let v = if vcfg.enabled {
             verdict(c, &self.spec.verify)
         } else {

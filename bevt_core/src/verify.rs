@@ -157,7 +157,10 @@ mod tests {
             assert_eq!(consensus_score(&a, &a, g, norm, &mut s), 1.0);
             let near = consensus_score(&a, &peak_map(g, 10.0, 11.0), g, norm, &mut s);
             let far = consensus_score(&a, &peak_map(g, 10.0, 15.0), g, norm, &mut s);
-            assert!(near < 1.0 && far < near && far > 0.0, "{norm:?}: {near} {far}");
+            assert!(
+                near < 1.0 && far < near && far > 0.0,
+                "{norm:?}: {near} {far}"
+            );
         }
     }
 

@@ -67,10 +67,18 @@ pub fn score_sequence(pred: &[BBox], gt: &[Option<BBox>]) -> SequenceScores {
             ious.iter().filter(|&&v| v > t).count() as f64 / n
         })
         .collect();
-    let finite: Vec<f64> = errs.iter().filter(|e| e.is_finite()).map(|&e| e as f64).collect();
+    let finite: Vec<f64> = errs
+        .iter()
+        .filter(|e| e.is_finite())
+        .map(|&e| e as f64)
+        .collect();
     SequenceScores {
         frames_scored: errs.len(),
-        precision_20: errs.iter().filter(|&&e| e <= PRECISION_THRESHOLD_PX).count() as f64 / n,
+        precision_20: errs
+            .iter()
+            .filter(|&&e| e <= PRECISION_THRESHOLD_PX)
+            .count() as f64
+            / n,
         auc: success_curve.iter().sum::<f64>() / SUCCESS_STEPS as f64,
         success_50: ious.iter().filter(|&&v| v > 0.5).count() as f64 / n,
         mean_center_error: if finite.is_empty() {
@@ -89,7 +97,13 @@ pub fn mean_curve(curves: &[&[f64]]) -> Vec<f64> {
         return Vec::new();
     };
     (0..first.len())
-        .map(|i| curves.iter().map(|c| c.get(i).copied().unwrap_or(0.0)).sum::<f64>() / curves.len() as f64)
+        .map(|i| {
+            curves
+                .iter()
+                .map(|c| c.get(i).copied().unwrap_or(0.0))
+                .sum::<f64>()
+                / curves.len() as f64
+        })
         .collect()
 }
 

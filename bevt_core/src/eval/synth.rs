@@ -51,6 +51,9 @@ pub struct SynthFrame {
     pub truth: BBox,
 }
 
+/// Width of the target's dark rim as a fraction of its smaller side.
+const RIM_FRACTION: f32 = 0.08;
+
 fn hash(x: i32, y: i32, seed: u32) -> f32 {
     let mut h = (x as u32).wrapping_mul(0x8da6_b343)
         ^ (y as u32).wrapping_mul(0xd816_3841)
@@ -88,7 +91,12 @@ impl SynthParams {
         let phase = tf * 0.06;
         let cx = self.width as f32 / 2.0 + self.path_amplitude.0 * phase.sin();
         let cy = self.height as f32 / 2.0 + self.path_amplitude.1 * (1.0 - phase.cos());
-        BBox::new(cx - w / 2.0, cy - h / 2.0 - self.path_amplitude.1 / 2.0, w, h)
+        BBox::new(
+            cx - w / 2.0,
+            cy - h / 2.0 - self.path_amplitude.1 / 2.0,
+            w,
+            h,
+        )
     }
 
     /// Renders frame `t`.
@@ -111,7 +119,14 @@ impl SynthParams {
                 if inside {
                     // Target texture in its own (scaled) coordinates: moves and scales with it.
                     let (u, v) = ((xf - truth.x) / s, (yf - truth.y) / s);
-                    let t0 = texture(u * 0.7, v * 0.7, self.seed + 100);
+                    // A dark rim (like a vehicle's outline) plus internal texture.
+                    let rim = u.min(v).min(self.target.0 - u).min(self.target.1 - v)
+                        < RIM_FRACTION * self.target.0.min(self.target.1);
+                    let t0 = if rim {
+                        0.0
+                    } else {
+                        texture(u * 0.7, v * 0.7, self.seed + 100)
+                    };
                     px[0] = (60.0 + 190.0 * t0) as u8;
                     px[1] = (30.0 + 120.0 * (1.0 - t0)) as u8;
                     px[2] = (20.0 + 60.0 * t0) as u8;
@@ -139,7 +154,12 @@ mod tests {
         let b = p.frame(3);
         assert_eq!(a.rgb, b.rgb);
         let mean = a.rgb.iter().map(|&v| v as f64).sum::<f64>() / a.rgb.len() as f64;
-        let var = a.rgb.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / a.rgb.len() as f64;
+        let var = a
+            .rgb
+            .iter()
+            .map(|&v| (v as f64 - mean).powi(2))
+            .sum::<f64>()
+            / a.rgb.len() as f64;
         assert!(var > 100.0, "{var}");
     }
 

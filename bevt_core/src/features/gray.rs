@@ -8,23 +8,40 @@ const LUMA: [f32; 3] = [0.299, 0.587, 0.114];
 /// Writes the mean luminance of each `cell × cell` block of `patch`, `/255 − 0.5`, into
 /// `out` (row-major `rows × cols`).
 pub fn cell_gray(patch: &Patch, cell: usize, rows: usize, cols: usize, out: &mut [f32]) {
-    out[..rows * cols].iter_mut().for_each(|v| *v = 0.0);
+    let out = &mut out[..rows * cols];
+    out.iter_mut().for_each(|v| *v = 0.0);
     let side = patch.side;
     let n = side * side;
+    let width = cols * cell;
     let inv = 1.0 / (255.0 * (cell * cell) as f32);
     for r in 0..rows * cell {
         let orow = &mut out[(r / cell) * cols..(r / cell + 1) * cols];
-        for c in 0..cols * cell {
-            let i = r * side + c;
-            let v = if patch.planes == 3 {
-                LUMA[0] * patch.data[i] + LUMA[1] * patch.data[n + i] + LUMA[2] * patch.data[2 * n + i]
-            } else {
-                patch.data[i]
-            };
-            orow[c / cell] += v;
+        let i = r * side;
+        if patch.planes == 3 {
+            let (pr, pg, pb) = (
+                &patch.data[i..i + width],
+                &patch.data[n + i..n + i + width],
+                &patch.data[2 * n + i..2 * n + i + width],
+            );
+            for (k, o) in orow.iter_mut().enumerate() {
+                let span = k * cell..(k + 1) * cell;
+                let (sr, sg, sb): (f32, f32, f32) = (
+                    pr[span.clone()].iter().sum(),
+                    pg[span.clone()].iter().sum(),
+                    pb[span].iter().sum(),
+                );
+                *o += LUMA[0] * sr + LUMA[1] * sg + LUMA[2] * sb;
+            }
+        } else {
+            for (o, chunk) in orow
+                .iter_mut()
+                .zip(patch.data[i..i + width].chunks_exact(cell))
+            {
+                *o += chunk.iter().sum::<f32>();
+            }
         }
     }
-    for v in &mut out[..rows * cols] {
+    for v in out.iter_mut() {
         *v = *v * inv - 0.5;
     }
 }
@@ -43,5 +60,22 @@ mod tests {
         let p = Patch::new(8, 3);
         cell_gray(&p, 4, 2, 2, &mut out);
         assert!(out.iter().all(|v| (v + 0.5).abs() < 1e-5));
+    }
+
+    #[test]
+    fn each_cell_averages_its_own_pixels() {
+        let mut p = Patch::new(4, 3);
+        // Left half red 255 (luma 76.2), right half black; cell 2 → 2x2 cells.
+        for r in 0..4 {
+            for c in 0..2 {
+                p.data[r * 4 + c] = 255.0;
+            }
+        }
+        let mut out = vec![0.0; 4];
+        cell_gray(&p, 2, 2, 2, &mut out);
+        let red = 0.299 - 0.5;
+        for (v, want) in out.iter().zip([red, -0.5, red, -0.5]) {
+            assert!((v - want).abs() < 1e-5, "{out:?}");
+        }
     }
 }

@@ -28,14 +28,39 @@ pub struct Hog {
     cell: usize,
     grayscale: bool,
     layers: Vec<LayerInfo>,
-    /// Direction unit vectors of the 9 half-plane orientations.
-    dirs: [(f32, f32); ORIENTATIONS],
     hist: Vec<f32>,
     energy: Vec<f32>,
     norm: Vec<f32>,
-    col_bin: Vec<(isize, f32)>,
+    col_bin: Vec<(usize, usize, f32, f32)>,
     mag: Vec<f32>,
     bin: Vec<u8>,
+    row_gx: Vec<f32>,
+    row_gy: Vec<f32>,
+    row_m2: Vec<f32>,
+}
+
+/// `atan2(y, x)` in (−π, π] to within 1e-5 rad (a minimax polynomial on [0, 1]), far below
+/// the 20° bin width.
+#[allow(clippy::excessive_precision)] // published minimax coefficients, kept as printed
+fn fast_atan2(y: f32, x: f32) -> f32 {
+    use std::f32::consts::{FRAC_PI_2, PI};
+    // Branch-free (selects only) so the per-row loop vectorises.
+    let (ax, ay) = (x.abs(), y.abs());
+    let (mn, mx) = (ax.min(ay), ax.max(ay));
+    let a = if mx > 0.0 { mn / mx } else { 0.0 };
+    let s = a * a;
+    let r = ((((-0.013_480_470 * s + 0.057_477_314) * s - 0.121_239_071) * s + 0.195_635_925) * s
+        - 0.332_994_597)
+        * s
+        * a
+        + 0.999_995_630 * a;
+    let r = if ay > ax { FRAC_PI_2 - r } else { r };
+    let r = if x < 0.0 { PI - r } else { r };
+    if y < 0.0 {
+        -r
+    } else {
+        r
+    }
 }
 
 impl Hog {
@@ -44,11 +69,6 @@ impl Hog {
     pub fn new(cell: usize, grayscale: bool) -> Self {
         let channels = HOG_CHANNELS + usize::from(grayscale);
         let name = if grayscale { "hog+gray" } else { "hog" };
-        let mut dirs = [(0.0, 0.0); ORIENTATIONS];
-        for (k, d) in dirs.iter_mut().enumerate() {
-            let a = k as f32 * std::f32::consts::PI / ORIENTATIONS as f32;
-            *d = (a.cos(), a.sin());
-        }
         Self {
             cell: cell.max(1),
             grayscale,
@@ -57,13 +77,15 @@ impl Hog {
                 channels,
                 weight: 1.0,
             }],
-            dirs,
             hist: Vec::new(),
             energy: Vec::new(),
             norm: Vec::new(),
             col_bin: Vec::new(),
             mag: Vec::new(),
             bin: Vec::new(),
+            row_gx: Vec::new(),
+            row_gy: Vec::new(),
+            row_m2: Vec::new(),
         }
     }
 
@@ -73,43 +95,65 @@ impl Hog {
         let n = s * s;
         self.mag.resize(n, 0.0);
         self.bin.resize(n, 0);
+        self.row_gx.resize(s, 0.0);
+        self.row_gy.resize(s, 0.0);
+        self.row_m2.resize(s, 0.0);
+        let bins_per_rad = ORIENTATIONS as f32 / std::f32::consts::PI;
+        let nbins = (2 * ORIENTATIONS) as u32;
         for r in 0..s {
-            let (ru, rd, sy) = match (r, s) {
-                (_, 1) => (0, 0, 0.0),
-                (0, _) => (0, 1, 1.0),
-                (r, s) if r == s - 1 => (r - 1, r, 1.0),
-                (r, _) => (r - 1, r + 1, 0.5),
+            let (ru, rd, sy) = match r {
+                _ if s == 1 => (0, 0, 0.0),
+                0 => (0, 1, 1.0),
+                r if r == s - 1 => (r - 1, r, 1.0),
+                r => (r - 1, r + 1, 0.5),
             };
-            for c in 0..s {
-                let (cl, cr, sx) = match (c, s) {
-                    (_, 1) => (0, 0, 0.0),
-                    (0, _) => (0, 1, 1.0),
-                    (c, s) if c == s - 1 => (c - 1, c, 1.0),
-                    (c, _) => (c - 1, c + 1, 0.5),
-                };
-                let mut best = (0.0f32, 0.0f32, -1.0f32);
-                for p in 0..patch.planes {
-                    let pl = &patch.data[p * n..(p + 1) * n];
-                    let gx = (pl[r * s + cr] - pl[r * s + cl]) * sx;
-                    let gy = (pl[rd * s + c] - pl[ru * s + c]) * sy;
+            for p in 0..patch.planes {
+                let pl = &patch.data[p * n..(p + 1) * n];
+                let up = &pl[ru * s..ru * s + s];
+                let dn = &pl[rd * s..rd * s + s];
+                let cur = &pl[r * s..r * s + s];
+                let first = p == 0;
+                let mut put = |c: usize, gx: f32, gy: f32| {
                     let m2 = gx * gx + gy * gy;
-                    if m2 > best.2 {
-                        best = (gx, gy, m2);
+                    if first || m2 > self.row_m2[c] {
+                        self.row_gx[c] = gx;
+                        self.row_gy[c] = gy;
+                        self.row_m2[c] = m2;
                     }
+                };
+                if s == 1 {
+                    put(0, 0.0, 0.0);
+                    continue;
                 }
-                let (gx, gy, m2) = best;
-                let mut kbest = 0usize;
-                let mut dbest = 0.0f32;
-                for (k, &(u, v)) in self.dirs.iter().enumerate() {
-                    let d = u * gx + v * gy;
-                    if d.abs() > dbest.abs() {
-                        dbest = d;
-                        kbest = k;
-                    }
+                put(0, cur[1] - cur[0], (dn[0] - up[0]) * sy);
+                put(s - 1, cur[s - 1] - cur[s - 2], (dn[s - 1] - up[s - 1]) * sy);
+                // Interior columns: central differences, written as slice zips so they
+                // vectorise.
+                let gxs = &mut self.row_gx[1..s - 1];
+                let gys = &mut self.row_gy[1..s - 1];
+                let m2s = &mut self.row_m2[1..s - 1];
+                let left = &cur[..s - 2];
+                let right = &cur[2..];
+                for i in 0..s - 2 {
+                    let gx = (right[i] - left[i]) * 0.5;
+                    let gy = (dn[i + 1] - up[i + 1]) * sy;
+                    let m2 = gx * gx + gy * gy;
+                    let take = first || m2 > m2s[i];
+                    gxs[i] = if take { gx } else { gxs[i] };
+                    gys[i] = if take { gy } else { gys[i] };
+                    m2s[i] = if take { m2 } else { m2s[i] };
                 }
-                let o = if dbest < 0.0 { kbest + ORIENTATIONS } else { kbest };
-                self.mag[r * s + c] = m2.max(0.0).sqrt();
-                self.bin[r * s + c] = o as u8;
+            }
+            let mrow = &mut self.mag[r * s..(r + 1) * s];
+            let brow = &mut self.bin[r * s..(r + 1) * s];
+            for c in 0..s {
+                mrow[c] = self.row_m2[c].sqrt();
+                // Nearest of the 18 directions k·20°, θ ∈ [0, 2π), ties upward as Dollár's
+                // `(int)(θ·18/2π + 0.5)`, so opposite gradients land in opposite bins.
+                let t = fast_atan2(self.row_gy[c], self.row_gx[c]) * bins_per_rad;
+                let t = if t < 0.0 { t + nbins as f32 } else { t };
+                let b = (t + 0.5) as u32;
+                brow[c] = (if b >= nbins { b - nbins } else { b }) as u8;
             }
         }
     }
@@ -122,35 +166,41 @@ impl Hog {
         self.hist.resize(no * nb, 0.0);
         let inv = 1.0 / cell as f32;
         let norm = inv * inv;
-        let used = (wb * cell).min(side);
-        self.col_bin.clear();
-        for x in 0..used {
+        // Per pixel column (and row): the two neighbouring cells and their weights; a cell
+        // outside the grid gets weight 0 and a harmless in-range index.
+        let split = |x: usize, n: usize| {
             let xb = (x as f32 + 0.5) * inv - 0.5;
             let x0 = xb.floor();
-            self.col_bin.push((x0 as isize, xb - x0));
+            let d = xb - x0;
+            let x0 = x0 as isize;
+            let lo_ok = x0 >= 0;
+            let hi_ok = x0 + 1 < n as isize;
+            let i0 = if lo_ok { x0 as usize } else { 0 };
+            let i1 = if hi_ok { (x0 + 1) as usize } else { n - 1 };
+            (
+                i0,
+                i1,
+                if lo_ok { 1.0 - d } else { 0.0 },
+                if hi_ok { d } else { 0.0 },
+            )
+        };
+        self.col_bin.clear();
+        for x in 0..(wb * cell).min(side) {
+            self.col_bin.push(split(x, wb));
         }
         for y in 0..(hb * cell).min(side) {
-            let yb = (y as f32 + 0.5) * inv - 0.5;
-            let y0f = yb.floor();
-            let y0 = y0f as isize;
-            let yd = yb - y0f;
-            for (x, &(x0, xd)) in self.col_bin.iter().enumerate() {
-                let m = self.mag[y * side + x] * norm;
-                if m == 0.0 {
-                    continue;
-                }
-                let h = &mut self.hist[self.bin[y * side + x] as usize * nb..][..nb];
-                let ws = [
-                    (y0, x0, (1.0 - yd) * (1.0 - xd)),
-                    (y0, x0 + 1, (1.0 - yd) * xd),
-                    (y0 + 1, x0, yd * (1.0 - xd)),
-                    (y0 + 1, x0 + 1, yd * xd),
-                ];
-                for (cy, cx, w) in ws {
-                    if cy >= 0 && cx >= 0 && (cy as usize) < hb && (cx as usize) < wb {
-                        h[cy as usize * wb + cx as usize] += m * w;
-                    }
-                }
+            let (y0, y1, wy0, wy1) = split(y, hb);
+            let (r0, r1) = (y0 * wb, y1 * wb);
+            let mrow = &self.mag[y * side..];
+            let brow = &self.bin[y * side..];
+            for (x, &(x0, x1, wx0, wx1)) in self.col_bin.iter().enumerate() {
+                let m = mrow[x] * norm;
+                let h = &mut self.hist[brow[x] as usize * nb..][..nb];
+                let (a, b) = (m * wy0, m * wy1);
+                h[r0 + x0] += a * wx0;
+                h[r0 + x1] += a * wx1;
+                h[r1 + x0] += b * wx0;
+                h[r1 + x1] += b * wx1;
             }
         }
     }
@@ -223,7 +273,9 @@ impl FeatureExtractor for Hog {
         self.normalisers(cell, hb, wb);
         let wb1 = wb + 1;
         let no = 2 * ORIENTATIONS;
-        out.data[..HOG_CHANNELS * nb].iter_mut().for_each(|v| *v = 0.0);
+        out.data[..HOG_CHANNELS * nb]
+            .iter_mut()
+            .for_each(|v| *v = 0.0);
         for cy in 0..hb {
             for cx in 0..wb {
                 let i = cy * wb + cx;
@@ -312,10 +364,10 @@ mod tests {
         let nb = 64;
         let i = 3 * 8 + 3; // cell next to the edge
         let sens: Vec<f32> = (0..18).map(|o| f.data[o * nb + i]).collect();
-        let (best, _) = sens
-            .iter()
-            .enumerate()
-            .fold((0, f32::MIN), |a, (k, &v)| if v > a.1 { (k, v) } else { a });
+        let (best, _) =
+            sens.iter()
+                .enumerate()
+                .fold((0, f32::MIN), |a, (k, &v)| if v > a.1 { (k, v) } else { a });
         assert_eq!(best, 0, "{sens:?}");
         // Contrast-insensitive bin 0 carries it too; the opposite sensitive bin does not.
         assert!(f.data[18 * nb + i] > 0.1);
@@ -348,6 +400,43 @@ mod tests {
                 assert!(f.data[d * nb + i] <= TEXTURE_WEIGHT * 18.0 * CLIP + 1e-4);
             }
         }
+    }
+
+    #[test]
+    fn fast_atan2_matches_std() {
+        for i in 0..3600 {
+            let a = i as f32 * std::f32::consts::PI / 1800.0 - std::f32::consts::PI + 1e-4;
+            for r in [0.01f32, 1.0, 300.0] {
+                let (y, x) = (r * a.sin(), r * a.cos());
+                assert!((fast_atan2(y, x) - y.atan2(x)).abs() < 2e-5, "{a}");
+            }
+        }
+        assert_eq!(fast_atan2(0.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn opposite_vertical_gradients_share_an_insensitive_bin() {
+        // θ = 90° and 270° sit exactly between two bins; they must fall in opposite
+        // sensitive bins (k and k + 9) so the insensitive channel sees one orientation.
+        let s = 16;
+        let mut up = Patch::new(s, 1);
+        for r in 0..s {
+            for c in 0..s {
+                up.data[r * s + c] = if r >= s / 2 { 100.0 } else { 0.0 };
+            }
+        }
+        let mut down = up.clone();
+        down.data.iter_mut().for_each(|v| *v = 100.0 - *v);
+        let mut h = Hog::new(4, false);
+        h.gradients(&up);
+        let a = h.bin[(s / 2) * s + 3];
+        h.gradients(&down);
+        let b = h.bin[(s / 2) * s + 3];
+        assert_eq!(
+            (a as usize + ORIENTATIONS) % (2 * ORIENTATIONS),
+            b as usize,
+            "{a} {b}"
+        );
     }
 
     #[test]

@@ -89,8 +89,12 @@ pub trait FeatureExtractor: Send {
     ///
     /// # Errors
     /// [`TrackError::Feature`] when the backend fails.
-    fn extract(&mut self, patch: &Patch, cell: usize, out: &mut FeatureMap)
-        -> Result<(), TrackError>;
+    fn extract(
+        &mut self,
+        patch: &Patch,
+        cell: usize,
+        out: &mut FeatureMap,
+    ) -> Result<(), TrackError>;
 
     /// An independent extractor with the same settings (one per parallel worker).
     fn boxed_clone(&self) -> Box<dyn FeatureExtractor>;

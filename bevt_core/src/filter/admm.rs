@@ -246,7 +246,14 @@ impl AdmmSolver {
     }
 
     /// Sherman–Morrison closed form of the per-bin `ĝ` subproblem.
-    fn g_step(&mut self, xf: &[Complex32], yf: &[Complex32], g_f: &mut [Complex32], mu: f32, t: f32) {
+    fn g_step(
+        &mut self,
+        xf: &[Complex32],
+        yf: &[Complex32],
+        g_f: &mut [Complex32],
+        mu: f32,
+        t: f32,
+    ) {
         let bins = self.bins;
         self.s_lx.iter_mut().for_each(|v| *v = Complex32::default());
         self.s_hx.iter_mut().for_each(|v| *v = Complex32::default());
@@ -290,7 +297,9 @@ impl AdmmSolver {
                 *t = g * mu + l;
             }
             for r in r0..r1 {
-                self.spat2[r * w..(r + 1) * w].iter_mut().for_each(|v| *v = 0.0);
+                self.spat2[r * w..(r + 1) * w]
+                    .iter_mut()
+                    .for_each(|v| *v = 0.0);
             }
             match &self.penalty {
                 PenaltyData::Matrix(ps) => {
@@ -316,7 +325,8 @@ impl AdmmSolver {
                     let wv = &ws[it];
                     for r in r0..r1 {
                         for c in c0..c1 {
-                            self.spat2[r * w + c] = self.spat[r * w + c] * wv[(r - r0) * bw + c - c0];
+                            self.spat2[r * w + c] =
+                                self.spat[r * w + c] * wv[(r - r0) * bw + c - c0];
                         }
                     }
                 }
@@ -330,7 +340,12 @@ impl AdmmSolver {
                     }
                 }
             }
-            fft.forward_rows(&self.spat2, r0, r1, &mut self.h_f[ch * bins..(ch + 1) * bins]);
+            fft.forward_rows(
+                &self.spat2,
+                r0,
+                r1,
+                &mut self.h_f[ch * bins..(ch + 1) * bins],
+            );
         }
     }
 }
@@ -343,7 +358,9 @@ mod tests {
     use nalgebra::Complex;
 
     fn lcg(seed: &mut u64) -> f32 {
-        *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        *seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         ((*seed >> 33) as f32 / (1u64 << 31) as f32) - 0.5
     }
 
@@ -366,7 +383,8 @@ mod tests {
             penalty: PenaltyKind::None,
         };
         let reg = vec![1.0; 36];
-        let mut solver = AdmmSolver::new(grid, bins, d, &params, &reg, CropBox::centred(grid, grid));
+        let mut solver =
+            AdmmSolver::new(grid, bins, d, &params, &reg, CropBox::centred(grid, grid));
         solver.l_f.copy_from_slice(&lf);
         solver.h_f.copy_from_slice(&hf);
         for (k, s) in solver.s_xx.iter_mut().enumerate() {
@@ -384,7 +402,11 @@ mod tests {
                 .collect();
             let a = DMatrix::<Complex<f64>>::from_fn(d, d, |i, j| {
                 x[i] * x[j].conj() / t as f64
-                    + if i == j { Complex::new(mu as f64, 0.0) } else { Complex::new(0.0, 0.0) }
+                    + if i == j {
+                        Complex::new(mu as f64, 0.0)
+                    } else {
+                        Complex::new(0.0, 0.0)
+                    }
             });
             let y = Complex::new(yf[k].re as f64, yf[k].im as f64);
             let rhs = nalgebra::DVector::<Complex<f64>>::from_fn(d, |i, _| {
@@ -404,7 +426,14 @@ mod tests {
 
     /// `½‖y − Σ_d x_d ⋆ h_d‖²` (spatial, via Parseval) for a filter that honours the crop,
     /// plus the elementwise penalty `Σ‖p ⊙ h‖²`.
-    fn objective(fft: &mut Fft2, xf: &[Complex32], yf: &[Complex32], hf: &[Complex32], reg: &[f32], d: usize) -> f64 {
+    fn objective(
+        fft: &mut Fft2,
+        xf: &[Complex32],
+        yf: &[Complex32],
+        hf: &[Complex32],
+        reg: &[f32],
+        d: usize,
+    ) -> f64 {
         let bins = fft.spectrum_len();
         let grid = fft.grid();
         let mut resp = vec![Complex32::default(); bins];
@@ -424,7 +453,11 @@ mod tests {
         let mut hs = vec![0.0f32; grid.len()];
         for j in 0..d {
             fft.inverse(&hf[j * bins..(j + 1) * bins], &mut hs);
-            pen += hs.iter().zip(reg).map(|(h, p)| ((h * p) as f64).powi(2)).sum::<f64>();
+            pen += hs
+                .iter()
+                .zip(reg)
+                .map(|(h, p)| ((h * p) as f64).powi(2))
+                .sum::<f64>();
         }
         data + pen
     }

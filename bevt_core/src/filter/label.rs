@@ -50,7 +50,13 @@ pub fn hann2d(grid: GridSize) -> Vec<f32> {
 /// Quadratic bowl regulariser on the grid, centred on the grid centre:
 /// `(edge − min)·((r/ρ_r)² + (c/ρ_c)²) + min`, `r, c ∈ −(n−1)/2 … (n−1)/2`,
 /// `ρ = 0.5 · base_target / cell`.
-pub fn reg_window(grid: GridSize, base_target: Size2, cell: usize, min: f32, edge: f32) -> Vec<f32> {
+pub fn reg_window(
+    grid: GridSize,
+    base_target: Size2,
+    cell: usize,
+    min: f32,
+    edge: f32,
+) -> Vec<f32> {
     let rho_r = (0.5 * base_target.h / cell as f32).max(1e-3);
     let rho_c = (0.5 * base_target.w / cell as f32).max(1e-3);
     let mut out = vec![0.0; grid.len()];

@@ -75,7 +75,11 @@ pub fn subpixel_peak(
     let eval = |y: f32, x: f32, s: &mut NewtonScratch, derivs: bool| {
         for (kx, e) in s.ex.iter_mut().enumerate() {
             // Half-spectrum weight: interior columns stand for themselves and their mirror.
-            let wgt = if kx == 0 || (w % 2 == 0 && kx == wc - 1) { 1.0 } else { 2.0 };
+            let wgt = if kx == 0 || (w % 2 == 0 && kx == wc - 1) {
+                1.0
+            } else {
+                2.0
+            };
             *e = Complex32::from_polar(wgt, kx as f32 * x);
         }
         for ky in 0..h {

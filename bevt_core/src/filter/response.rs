@@ -21,7 +21,9 @@ pub fn fused_response(
     bins: usize,
     out: &mut [Complex32],
 ) {
-    out[..bins].iter_mut().for_each(|v| *v = Complex32::default());
+    out[..bins]
+        .iter_mut()
+        .for_each(|v| *v = Complex32::default());
     for layer in layers {
         let w = layer.weight;
         for d in layer.channels.clone() {
@@ -44,8 +46,14 @@ mod tests {
         let g = vec![Complex32::new(1.0, 0.0); 2 * bins];
         let x = vec![Complex32::new(2.0, 1.0); 2 * bins];
         let layers = vec![
-            LayerSlot { channels: 0..1, weight: 1.0 },
-            LayerSlot { channels: 1..2, weight: 0.5 },
+            LayerSlot {
+                channels: 0..1,
+                weight: 1.0,
+            },
+            LayerSlot {
+                channels: 1..2,
+                weight: 0.5,
+            },
         ];
         let mut out = vec![Complex32::default(); bins];
         fused_response(&g, &x, &layers, bins, &mut out);

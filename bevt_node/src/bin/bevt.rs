@@ -1,0 +1,413 @@
+//! `bevt`: evaluate, run and demonstrate the BEVT tracker from the command line.
+//!
+//! - `bevt demo`: track a synthetic sequence generated in memory (no files needed).
+//! - `bevt eval`: one-pass evaluation on a UAV123-style dataset, with plots and comparisons.
+//! - `bevt track`: track through a folder of frames from an initial box.
+
+use anyhow::{bail, Context, Result};
+use bevt_core::eval::metrics::score_sequence;
+use bevt_core::eval::synth::SynthParams;
+use bevt_core::{BBox, BevtTracker, Frame, PixelFormat, Tracker};
+use bevt_node::dataset::{format_annotation_row, image_files, open_dataset, parse_annotation};
+use bevt_node::params::load_config;
+use bevt_node::plots::{plot_curves, Curve};
+use bevt_node::report::{
+    build_summary, console_table, summarize_run, write_result_file, write_summary,
+};
+use bevt_node::runner::{decode_ahead, run_sequence, track_feed};
+use clap::{Args, Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+#[derive(Parser)]
+#[command(
+    name = "bevt",
+    version,
+    about = "BEVT visual object tracker: evaluation and tracking tools"
+)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Args, Clone)]
+struct ConfigArgs {
+    /// Tracker configuration (YAML); default: the embedded config/bevt.yaml.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Override a configuration key, e.g. `--set admm.penalty=none` (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Worker threads for one frame's scales (sets `threads`).
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Track a synthetic sequence generated in memory and score it against its exact truth.
+    Demo {
+        #[command(flatten)]
+        cfg: ConfigArgs,
+        /// Number of frames.
+        #[arg(long, default_value_t = 150)]
+        frames: usize,
+        /// Frame width, pixels.
+        #[arg(long, default_value_t = 640)]
+        width: usize,
+        /// Frame height, pixels.
+        #[arg(long, default_value_t = 360)]
+        height: usize,
+        /// Print every N-th frame.
+        #[arg(long, default_value_t = 15)]
+        every: usize,
+    },
+    /// One-pass evaluation on a dataset (UAV123 manifest, UAV123 download or OTB layout).
+    Eval {
+        #[command(flatten)]
+        cfg: ConfigArgs,
+        /// Dataset root.
+        #[arg(long)]
+        dataset: PathBuf,
+        /// Output folder for result files, summary.json and plots.
+        #[arg(long)]
+        out: PathBuf,
+        /// Comma-separated sequence names (default: all).
+        #[arg(long, value_delimiter = ',')]
+        sequences: Vec<String>,
+        /// Write precision and success plots (PNG).
+        #[arg(long)]
+        plots: bool,
+        /// Compare with another tracker's result folder, `NAME=DIR` (repeatable).
+        #[arg(long, value_name = "NAME=DIR")]
+        compare: Vec<String>,
+        /// Name of this run in tables and plots.
+        #[arg(long, default_value = "BEVT-rs")]
+        name: String,
+    },
+    /// Track through a folder of frames from an initial box.
+    Track {
+        #[command(flatten)]
+        cfg: ConfigArgs,
+        /// Folder of frames (jpg/png, sorted by name).
+        #[arg(long)]
+        images: PathBuf,
+        /// Initial box `x,y,w,h` on the first frame, 1-based like annotation files.
+        #[arg(long)]
+        init: String,
+        /// Result file (one `x,y,w,h` row per frame); default: standard output.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+}
+
+fn spec_of(c: &ConfigArgs) -> Result<bevt_core::TrackerSpec> {
+    let mut set = c.set.clone();
+    if let Some(t) = c.threads {
+        set.push(format!("threads={t}"));
+    }
+    Ok(load_config(c.config.as_deref(), &set)?)
+}
+
+fn pool(threads: usize) -> Result<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("bevt-worker-{i}"))
+        .build()
+        .context("cannot start the worker threads")
+}
+
+fn demo(
+    cfg: &ConfigArgs,
+    frames: usize,
+    width: usize,
+    height: usize,
+    every: usize,
+) -> Result<ExitCode> {
+    let spec = spec_of(cfg)?;
+    if width < 64 || height < 64 {
+        bail!("the demo needs frames of at least 64x64 pixels");
+    }
+    let seq = SynthParams {
+        width,
+        height,
+        frames: frames.max(2),
+        target: (width as f32 / 8.0, height as f32 / 7.0),
+        path_amplitude: (width as f32 / 5.0, height as f32 / 6.0),
+        ..SynthParams::default()
+    };
+    println!(
+        "bevt demo: synthetic {}x{} sequence, {} frames, textured target moving and growing over a moving background",
+        width, height, seq.frames
+    );
+    let threads = spec.config.threads;
+    let mut tracker = BevtTracker::new(spec);
+    let mut preds = Vec::with_capacity(seq.frames);
+    let mut truth = Vec::with_capacity(seq.frames);
+    let mut secs = 0.0;
+    let pool = pool(threads)?;
+    for t in 0..seq.frames {
+        let f = seq.frame(t);
+        let frame = Frame::packed(&f.rgb, width, height, PixelFormat::Rgb8)?;
+        let t0 = Instant::now();
+        let out = if t == 0 {
+            pool.install(|| tracker.init(&frame, f.truth))?;
+            None
+        } else {
+            Some(pool.install(|| tracker.update(&frame))?)
+        };
+        secs += t0.elapsed().as_secs_f64();
+        let b = out.map_or(f.truth, |o| o.bbox);
+        preds.push(b);
+        truth.push(Some(f.truth));
+        if let Some(o) = out {
+            if t % every.max(1) == 0 || t + 1 == seq.frames {
+                println!(
+                    "frame {t:4}  box {:7.1} {:7.1} {:6.1} {:6.1}  truth {:7.1} {:7.1} {:6.1} {:6.1}  error {:5.2} px  consensus {:.3}  {}",
+                    b.x, b.y, b.w, b.h, f.truth.x, f.truth.y, f.truth.w, f.truth.h,
+                    b.center().distance(&f.truth.center()),
+                    o.consensus,
+                    if o.learned { "learned" } else { "skipped" }
+                );
+            }
+        }
+    }
+    let s = score_sequence(&preds, &truth);
+    println!(
+        "demo: precision@20px {:.3}, success AUC {:.3}, mean centre error {:.2} px, {:.1} fps (tracking only)",
+        s.precision_20,
+        s.auc,
+        s.mean_center_error,
+        seq.frames as f64 / secs.max(1e-9)
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn eval(
+    cfg: &ConfigArgs,
+    dataset: &Path,
+    out: &Path,
+    sequences: &[String],
+    plots: bool,
+    compare: &[String],
+    name: &str,
+) -> Result<ExitCode> {
+    let spec = spec_of(cfg)?;
+    let mut ds = open_dataset(dataset)?;
+    if !sequences.is_empty() {
+        ds.select(sequences)?;
+    }
+    let peers: Vec<(String, PathBuf)> = compare
+        .iter()
+        .map(|c| {
+            c.split_once('=')
+                .map(|(n, d)| (n.to_string(), PathBuf::from(d)))
+                .with_context(|| format!("--compare {c:?}: expected NAME=DIR"))
+        })
+        .collect::<Result<_>>()?;
+    for (n, d) in &peers {
+        if !d.is_dir() {
+            bail!("--compare {n}: {} is not a folder", d.display());
+        }
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let pool = pool(spec.config.threads)?;
+    let config_json = serde_json::to_value(&spec.config)?;
+    let mut summaries = Vec::new();
+    let mut truths = BTreeMap::new();
+    println!(
+        "bevt eval: {} sequences from {} ({} layout), {} thread(s)",
+        ds.sequences.len(),
+        ds.root.display(),
+        ds.layout,
+        spec.config.threads
+    );
+    for entry in &ds.sequences {
+        let bar = ProgressBar::new(0);
+        bar.set_style(
+            ProgressStyle::with_template("{prefix:>14} [{bar:40}] {pos}/{len} {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar())
+                .progress_chars("=> "),
+        );
+        bar.set_prefix(entry.name.clone());
+        let mut tracker = BevtTracker::new(spec.clone());
+        let run = pool.install(|| {
+            run_sequence(entry, &mut tracker, |_, o| {
+                bar.inc(1);
+                if let Some(o) = o {
+                    bar.set_message(format!("C={:.2}", o.consensus));
+                }
+            })
+        });
+        bar.finish_and_clear();
+        if let Err(e) = write_result_file(out, &run) {
+            eprintln!("warning: cannot write the result of {}: {e}", run.name);
+        }
+        let s = summarize_run(&run);
+        println!(
+            "{:>14}: {} frames, P@20 {:.3}, AUC {:.3}, {:.1} fps{}",
+            s.name,
+            s.frames_tracked,
+            s.precision_20,
+            s.auc,
+            s.fps,
+            s.error
+                .as_deref()
+                .map_or(String::new(), |e| format!("  FAILED: {e}"))
+        );
+        truths.insert(run.name.clone(), run.truth.clone());
+        summaries.push(s);
+        // Keep a summary on disk after every sequence: nothing computed is lost.
+        let partial = build_summary(name, &ds, &summaries, &truths, &peers, config_json.clone());
+        write_summary(out, &partial)
+            .with_context(|| format!("cannot write {}/summary.json", out.display()))?;
+    }
+    let summary = build_summary(name, &ds, &summaries, &truths, &peers, config_json);
+    write_summary(out, &summary)?;
+    println!("\n{}", console_table(&summary));
+    if plots {
+        let mut prec = vec![Curve {
+            name: name.to_string(),
+            score: summary.overall.precision_20,
+            values: summary.overall.precision_curve.clone(),
+            own: true,
+        }];
+        let mut succ = vec![Curve {
+            name: name.to_string(),
+            score: summary.overall.auc,
+            values: summary.overall.success_curve.clone(),
+            own: true,
+        }];
+        for p in &summary.compare {
+            prec.push(Curve {
+                name: p.name.clone(),
+                score: p.overall.precision_20,
+                values: p.overall.precision_curve.clone(),
+                own: false,
+            });
+            succ.push(Curve {
+                name: p.name.clone(),
+                score: p.overall.auc,
+                values: p.overall.success_curve.clone(),
+                own: false,
+            });
+        }
+        let n = summary.overall.sequences;
+        plot_curves(
+            &out.join("precision.png"),
+            &format!("Precision plots of OPE ({n} sequences)"),
+            "Location error threshold (px)",
+            "Precision",
+            50.0,
+            &prec,
+        )
+        .map_err(anyhow::Error::msg)?;
+        plot_curves(
+            &out.join("success.png"),
+            &format!("Success plots of OPE ({n} sequences)"),
+            "Overlap threshold",
+            "Success rate",
+            1.0,
+            &succ,
+        )
+        .map_err(anyhow::Error::msg)?;
+        println!(
+            "plots: {}, {}",
+            out.join("precision.png").display(),
+            out.join("success.png").display()
+        );
+    }
+    println!("results: {}", out.display());
+    Ok(if summary.overall.failed > 0 {
+        ExitCode::from(2)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
+
+fn parse_box(s: &str) -> Result<BBox> {
+    let rows = parse_annotation(s, Path::new("--init")).with_context(|| format!("--init {s:?}"))?;
+    match rows.as_slice() {
+        [Some(b)] => Ok(*b),
+        _ => bail!("--init {s:?}: expected one finite box x,y,w,h"),
+    }
+}
+
+fn track(cfg: &ConfigArgs, images: &Path, init: &str, out: Option<&Path>) -> Result<ExitCode> {
+    let spec = spec_of(cfg)?;
+    let init = parse_box(init)?;
+    let files = image_files(images)?;
+    if files.is_empty() {
+        bail!("{} has no jpg/png frames", images.display());
+    }
+    let pool = pool(spec.config.threads)?;
+    let mut tracker = BevtTracker::new(spec);
+    let run = pool.install(|| track_feed(&mut tracker, decode_ahead(files), 0, init, |_, _| {}));
+    let mut text = String::new();
+    for b in &run.boxes {
+        text.push_str(&format_annotation_row(b.as_ref()));
+        text.push('\n');
+    }
+    match out {
+        Some(p) => {
+            std::fs::write(p, &text).with_context(|| format!("cannot write {}", p.display()))?
+        }
+        None => print!("{text}"),
+    }
+    eprintln!(
+        "tracked {} frames at {:.1} fps ({} learned, {} skipped)",
+        run.frames_tracked,
+        run.fps(),
+        run.learned,
+        run.skipped
+    );
+    if let Some(e) = run.error {
+        eprintln!(
+            "error: stopped early: {e} (the {} boxes before it were written)",
+            run.boxes.len()
+        );
+        return Ok(ExitCode::from(2));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn run(cli: Cli) -> Result<ExitCode> {
+    match &cli.cmd {
+        Cmd::Demo {
+            cfg,
+            frames,
+            width,
+            height,
+            every,
+        } => demo(cfg, *frames, *width, *height, *every),
+        Cmd::Eval {
+            cfg,
+            dataset,
+            out,
+            sequences,
+            plots,
+            compare,
+            name,
+        } => eval(cfg, dataset, out, sequences, *plots, compare, name),
+        Cmd::Track {
+            cfg,
+            images,
+            init,
+            out,
+        } => track(cfg, images, init, out.as_deref()),
+    }
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

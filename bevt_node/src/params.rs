@@ -1,0 +1,124 @@
+//! Tracker configuration from YAML files plus `key.path=value` overrides, validated once.
+
+use bevt_core::{TrackerConfig, TrackerSpec};
+use std::path::Path;
+use thiserror::Error;
+
+/// The shipped reference configuration (`config/bevt.yaml`), embedded so the tools work
+/// without any file.
+pub const DEFAULT_CONFIG_YAML: &str = include_str!("../../config/bevt.yaml");
+
+/// Errors of configuration loading.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum ParamsError {
+    /// The file cannot be read.
+    #[error("cannot read config {path}: {source}")]
+    Io {
+        /// The path.
+        path: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The YAML is malformed or has unknown keys / wrong types.
+    #[error("invalid config {origin}: {reason}")]
+    Parse {
+        /// File name or `--set` argument.
+        origin: String,
+        /// Parser message.
+        reason: String,
+    },
+    /// A value is out of range.
+    #[error("invalid config: {0}")]
+    Invalid(#[from] bevt_core::ConfigError),
+}
+
+/// Loads `path` (or the embedded default), applies `overrides` (`admm.penalty=none`, values
+/// parsed as YAML scalars) and validates.
+///
+/// # Errors
+/// [`ParamsError`] naming the file, the override or the field at fault.
+pub fn load_config(path: Option<&Path>, overrides: &[String]) -> Result<TrackerSpec, ParamsError> {
+    let (origin, text) = match path {
+        Some(p) => (
+            p.display().to_string(),
+            std::fs::read_to_string(p).map_err(|e| ParamsError::Io {
+                path: p.display().to_string(),
+                source: e,
+            })?,
+        ),
+        None => (
+            "(embedded default)".to_string(),
+            DEFAULT_CONFIG_YAML.to_string(),
+        ),
+    };
+    let parse_err = |origin: &str, e: &dyn std::fmt::Display| ParamsError::Parse {
+        origin: origin.to_string(),
+        reason: e.to_string(),
+    };
+    let mut value: serde_norway::Value = if text.trim().is_empty() {
+        serde_norway::Value::Mapping(Default::default())
+    } else {
+        serde_norway::from_str(&text).map_err(|e| parse_err(&origin, &e))?
+    };
+    for o in overrides {
+        let (key, raw) = o
+            .split_once('=')
+            .ok_or_else(|| parse_err(o, &"expected key.path=value"))?;
+        let v: serde_norway::Value = serde_norway::from_str(raw).map_err(|e| parse_err(o, &e))?;
+        let mut node = &mut value;
+        let parts: Vec<&str> = key.split('.').collect();
+        for (i, part) in parts.iter().enumerate() {
+            let map = node
+                .as_mapping_mut()
+                .ok_or_else(|| parse_err(o, &format!("{key}: not a section")))?;
+            let k = serde_norway::Value::String((*part).to_string());
+            if i + 1 == parts.len() {
+                map.insert(k, v.clone());
+                break;
+            }
+            node = map
+                .entry(k)
+                .or_insert_with(|| serde_norway::Value::Mapping(Default::default()));
+        }
+    }
+    let cfg: TrackerConfig = serde_norway::from_value(value).map_err(|e| parse_err(&origin, &e))?;
+    Ok(cfg.validate()?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bevt_core::filter::admm::PenaltyKind;
+
+    #[test]
+    fn embedded_default_is_the_core_default() {
+        let s = load_config(None, &[]).unwrap();
+        assert_eq!(s.config, TrackerConfig::default());
+    }
+
+    #[test]
+    fn overrides_set_nested_keys_and_are_validated() {
+        let s = load_config(None, &["admm.penalty=none".into(), "threads=2".into()]).unwrap();
+        assert_eq!(s.config.admm.penalty, PenaltyKind::None);
+        assert_eq!(s.config.threads, 2);
+        assert!(matches!(
+            load_config(None, &["admm.iterations=0".into()]),
+            Err(ParamsError::Invalid(_))
+        ));
+        assert!(matches!(
+            load_config(None, &["admm.bogus=1".into()]),
+            Err(ParamsError::Parse { .. })
+        ));
+        assert!(matches!(
+            load_config(None, &["noequals".into()]),
+            Err(ParamsError::Parse { .. })
+        ));
+    }
+
+    #[test]
+    fn missing_file_is_a_clear_error() {
+        let e = load_config(Some(Path::new("/nonexistent/bevt.yaml")), &[]).unwrap_err();
+        assert!(e.to_string().contains("/nonexistent/bevt.yaml"));
+    }
+}

@@ -1,0 +1,207 @@
+//! Runs a tracker over a sequence of image files: frames are decoded on a named prefetch
+//! thread while the tracker works, and only `init`/`update` are timed.
+//!
+//! Failures (an unreadable frame, a tracker error) end the run early with the reason;
+//! every box computed before that is kept.
+
+use crate::dataset::{Sequence, SequenceEntry};
+use bevt_core::{BBox, Frame, PixelFormat, TrackOutput, Tracker};
+use std::path::PathBuf;
+use std::sync::mpsc;
+use std::time::Instant;
+
+/// Frames decoded ahead of the tracker.
+const PREFETCH_FRAMES: usize = 4;
+
+/// A decoded RGB frame.
+pub type RgbFrame = image::RgbImage;
+
+/// The result of tracking one sequence.
+#[derive(Debug, Clone, Default)]
+pub struct TrackRun {
+    /// Box per frame processed (`None` before the initial frame).
+    pub boxes: Vec<Option<BBox>>,
+    /// Tracker output per frame processed (`None` for the init frame and before it).
+    pub outputs: Vec<Option<TrackOutput>>,
+    /// Frames given to the tracker (init included).
+    pub frames_tracked: usize,
+    /// Seconds spent in `init` and `update`.
+    pub track_seconds: f64,
+    /// Frames the filter learned from (init excluded).
+    pub learned: usize,
+    /// Frames verification rejected.
+    pub skipped: usize,
+    /// Why the run stopped early, if it did.
+    pub error: Option<String>,
+}
+
+impl TrackRun {
+    /// Frames per second of tracking time (init and updates; decode excluded).
+    pub fn fps(&self) -> f64 {
+        if self.track_seconds > 0.0 {
+            self.frames_tracked as f64 / self.track_seconds
+        } else {
+            0.0
+        }
+    }
+}
+
+/// Decodes `paths` on a background thread, in order.
+///
+/// # Errors
+/// Each item is `Err(reason)` for a frame that cannot be read or decoded.
+pub fn decode_ahead(paths: Vec<PathBuf>) -> impl Iterator<Item = Result<RgbFrame, String>> {
+    let (tx, rx) = mpsc::sync_channel(PREFETCH_FRAMES);
+    let spawned = std::thread::Builder::new()
+        .name("bevt-decode".into())
+        .spawn(move || {
+            for p in paths {
+                let r = image::open(&p)
+                    .map(|i| i.to_rgb8())
+                    .map_err(|e| format!("{}: {e}", p.display()));
+                if tx.send(r).is_err() {
+                    break;
+                }
+            }
+        });
+    let failed = spawned
+        .err()
+        .map(|e| format!("cannot start the decoder thread: {e}"));
+    failed.into_iter().map(Err).chain(rx)
+}
+
+/// Tracks over `feed`, initialising with `init` on frame `init_index` (frames before it are
+/// decoded and skipped). `on_frame(i, output)` is called after every processed frame.
+pub fn track_feed<I>(
+    tracker: &mut dyn Tracker,
+    feed: I,
+    init_index: usize,
+    init: BBox,
+    mut on_frame: impl FnMut(usize, Option<&TrackOutput>),
+) -> TrackRun
+where
+    I: Iterator<Item = Result<RgbFrame, String>>,
+{
+    let mut run = TrackRun::default();
+    for (i, item) in feed.enumerate() {
+        let img = match item {
+            Ok(img) => img,
+            Err(e) => {
+                run.error = Some(format!("frame {}: {e}", i + 1));
+                break;
+            }
+        };
+        if i < init_index {
+            run.boxes.push(None);
+            run.outputs.push(None);
+            on_frame(i, None);
+            continue;
+        }
+        let frame = match Frame::packed(
+            img.as_raw(),
+            img.width() as usize,
+            img.height() as usize,
+            PixelFormat::Rgb8,
+        ) {
+            Ok(f) => f,
+            Err(e) => {
+                run.error = Some(format!("frame {}: {e}", i + 1));
+                break;
+            }
+        };
+        let t0 = Instant::now();
+        if i == init_index {
+            let r = tracker.init(&frame, init);
+            run.track_seconds += t0.elapsed().as_secs_f64();
+            if let Err(e) = r {
+                run.error = Some(format!("init on frame {}: {e}", i + 1));
+                break;
+            }
+            run.frames_tracked += 1;
+            run.boxes.push(Some(init));
+            run.outputs.push(None);
+            on_frame(i, None);
+            continue;
+        }
+        let r = tracker.update(&frame);
+        run.track_seconds += t0.elapsed().as_secs_f64();
+        match r {
+            Ok(out) => {
+                run.frames_tracked += 1;
+                if out.learned {
+                    run.learned += 1;
+                } else {
+                    run.skipped += 1;
+                }
+                run.boxes.push(Some(out.bbox));
+                run.outputs.push(Some(out));
+                on_frame(i, Some(&out));
+            }
+            Err(e) => {
+                run.error = Some(format!("frame {}: {e}", i + 1));
+                break;
+            }
+        }
+    }
+    run
+}
+
+/// A sequence's evaluation: its ground truth and the tracking run.
+#[derive(Debug, Clone)]
+pub struct SequenceRun {
+    /// Sequence name.
+    pub name: String,
+    /// Ground truth (empty when the annotation could not be read).
+    pub truth: Vec<Option<BBox>>,
+    /// The run (with `error` set when loading failed).
+    pub run: TrackRun,
+}
+
+/// One-pass evaluation of a dataset sequence: init on the first annotated frame, no
+/// re-initialisation.
+pub fn run_sequence(
+    entry: &SequenceEntry,
+    tracker: &mut dyn Tracker,
+    on_frame: impl FnMut(usize, Option<&TrackOutput>),
+) -> SequenceRun {
+    let seq: Sequence = match entry.load() {
+        Ok(s) => s,
+        Err(e) => {
+            return SequenceRun {
+                name: entry.name.clone(),
+                truth: Vec::new(),
+                run: TrackRun {
+                    error: Some(e.to_string()),
+                    ..TrackRun::default()
+                },
+            }
+        }
+    };
+    let Some((init_index, init)) = seq
+        .truth
+        .iter()
+        .enumerate()
+        .find_map(|(i, b)| b.map(|b| (i, b)))
+    else {
+        return SequenceRun {
+            name: seq.name,
+            truth: seq.truth,
+            run: TrackRun {
+                error: Some("no annotated frame to initialise on".into()),
+                ..TrackRun::default()
+            },
+        };
+    };
+    let run = track_feed(
+        tracker,
+        decode_ahead(seq.frames),
+        init_index,
+        init,
+        on_frame,
+    );
+    SequenceRun {
+        name: seq.name,
+        truth: seq.truth,
+        run,
+    }
+}

@@ -1,0 +1,7 @@
+//! The one integration-test binary: modules by topic.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // setup helpers outside #[test] fns
+
+mod bad_input;
+mod real_data;
+mod synthetic;
+mod tool;
