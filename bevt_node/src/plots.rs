@@ -86,7 +86,8 @@ pub fn plot_curves(
         let color = if c.own {
             PALETTE[0]
         } else {
-            let col = PALETTE[peer % PALETTE.len()];
+            // Peers cycle through every colour but ours.
+            let col = PALETTE[1 + (peer - 1) % (PALETTE.len() - 1)];
             peer += 1;
             col
         };
