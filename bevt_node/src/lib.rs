@@ -13,6 +13,8 @@
 //! The `bevt` binary (`src/bin/bevt.rs`) is a thin command-line layer over these.
 #![deny(missing_docs)]
 
+pub mod app;
+pub mod convert;
 pub mod dataset;
 pub mod params;
 pub mod plots;
