@@ -16,7 +16,10 @@
 pub mod app;
 pub mod convert;
 pub mod dataset;
+pub mod node_params;
 pub mod params;
 pub mod plots;
 pub mod report;
+pub mod ros;
 pub mod runner;
+pub mod sim;

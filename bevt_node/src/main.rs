@@ -1,0 +1,143 @@
+//! `bevt_node`: the ROS 2 tracking node (`ros2 run bevt_node bevt_node --ros-args ...`).
+//!
+//! `bevt_node --demo [--duration S]` runs the node with an in-process synthetic camera and a
+//! simulated ground station that initialises the track on a frame it received late, and
+//! prints the track once per second.
+
+use anyhow::{Context as _, Result};
+use bevt_core::eval::synth::SynthParams;
+use bevt_msgs::bevt::ReinitRequest;
+use bevt_msgs::builtin_interfaces::Time;
+use bevt_node::app::NodeCore;
+use bevt_node::convert::bbox_from_detection;
+use bevt_node::node_params::{launch_from_args, Launch};
+use bevt_node::ros;
+use bevt_node::sim::{spawn_camera, GroundStation};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// How late the demo's operator box is: the frame it was drawn on is this old.
+const DEMO_OPERATOR_DELAY: Duration = Duration::from_millis(400);
+/// Demo camera rate.
+const DEMO_RATE_HZ: f64 = 20.0;
+
+fn demo(launch: Launch, stop: Arc<AtomicBool>) -> Result<()> {
+    let seq = SynthParams {
+        width: 640,
+        height: 360,
+        frames: 300,
+        target: (64.0, 48.0),
+        path_amplitude: (120.0, 60.0),
+        ..SynthParams::default()
+    };
+    println!(
+        "bevt_node demo: synthetic {}x{} camera at {DEMO_RATE_HZ} Hz on domain {}; a ground station initialises on a frame {} ms old",
+        seq.width,
+        seq.height,
+        launch.ros.domain_id,
+        DEMO_OPERATOR_DELAY.as_millis()
+    );
+    let core = NodeCore::new(launch.tracker.clone(), launch.node.clone());
+    let ros_settings = launch.ros.clone();
+    let node_stop = stop.clone();
+    let node = std::thread::Builder::new()
+        .name("bevt-node".into())
+        .spawn(move || ros::run(core, &ros_settings, node_stop, |_| {}))?;
+    let (camera, truth) = spawn_camera(&launch.ros, seq, DEMO_RATE_HZ, stop.clone())?;
+    let gs = GroundStation::new(&launch.ros)?;
+    std::thread::sleep(Duration::from_secs(1));
+    // The operator drew the box on an older frame: pick the frame ~400 ms old.
+    let (stamp, b) = {
+        let log = truth
+            .lock()
+            .map_err(|_| anyhow::anyhow!("truth log poisoned"))?;
+        let target =
+            log.keys().next_back().copied().unwrap_or(0) - DEMO_OPERATOR_DELAY.as_nanos() as i64;
+        log.range(target..)
+            .next()
+            .map(|(k, v)| (*k, *v))
+            .context("the camera published nothing")?
+    };
+    let req = ReinitRequest {
+        x: b.x as f64,
+        y: b.y as f64,
+        width: b.w as f64,
+        height: b.h as f64,
+        stamp: Time::from_nanos(stamp),
+        frame_id: String::new(),
+    };
+    match gs.reinit(&req, Duration::from_secs(5)) {
+        Some(r) => println!(
+            "ground station: reinit -> success={} ({})",
+            r.success, r.message
+        ),
+        None => println!("ground station: reinit timed out"),
+    }
+    let end = Instant::now() + launch.demo_duration;
+    let mut next_print = Instant::now() + Duration::from_secs(1);
+    let mut last = None;
+    while Instant::now() < end && !stop.load(Ordering::Relaxed) {
+        if let Some(d) = gs.take_detections().into_iter().last() {
+            last = Some(d);
+        }
+        if Instant::now() >= next_print {
+            next_print += Duration::from_secs(1);
+            match &last {
+                Some(d) if !d.detections.is_empty() => {
+                    let b = bbox_from_detection(&d.detections[0]);
+                    let t = truth
+                        .lock()
+                        .ok()
+                        .and_then(|l| l.get(&d.header.stamp.as_nanos()).copied());
+                    let err = t.map_or("?".to_string(), |t| {
+                        format!("{:.1} px", b.center().distance(&t.center()))
+                    });
+                    println!(
+                        "track {}: box {:7.1} {:7.1} {:5.1} {:5.1}  consensus {:.3}  error vs truth {err}",
+                        d.detections[0].id, b.x, b.y, b.w, b.h, d.detections[0].results[0].hypothesis.score
+                    );
+                }
+                _ => println!("no detection yet"),
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    stop.store(true, Ordering::Relaxed);
+    let _ = camera.join();
+    match node.join() {
+        Ok(r) => r?,
+        Err(_) => anyhow::bail!("the node thread panicked"),
+    }
+    Ok(())
+}
+
+fn run() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let launch = launch_from_args(&args, |k| std::env::var(k).ok())?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let s = stop.clone();
+    ctrlc::set_handler(move || s.store(true, Ordering::Relaxed))
+        .context("cannot install the SIGINT/SIGTERM handler")?;
+    if launch.demo {
+        return demo(launch, stop);
+    }
+    eprintln!(
+        "bevt_node: domain {}, namespace {}, interfaces {:?}, services {:?}",
+        launch.ros.domain_id, launch.ros.namespace, launch.ros.networks, launch.ros.service_mapping
+    );
+    let core = NodeCore::new(launch.tracker.clone(), launch.node.clone());
+    ros::run(core, &launch.ros, stop, |_| {})?;
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    match run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("bevt_node: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,376 @@
+//! Start-up configuration of the ROS node: `ros2 run`-compatible arguments
+//! (`--ros-args --params-file FILE -p name:=value -r from:=to -r __ns:=/ns -r __node:=name`),
+//! the standard parameters-file format (`bevt_node: ros__parameters: {...}` or `/**:`), and
+//! the `ROS_DOMAIN_ID` / `ROS_LOCALHOST_ONLY` environment variables (which ros2-client
+//! itself ignores).
+//!
+//! Parameters (see `config/node.yaml`): `domain_id`, `network_interfaces` (addresses;
+//! `[]` = all; default loopback only), `service_mapping` (`enhanced` | `cyclone`),
+//! `reinit_buffer_frames`, `stale_timeout_s`, `diagnostics_period_s`, `class_id`, and
+//! every tracker key as `tracker.<section>.<key>` (as in `config/bevt.yaml`).
+//! Unknown or invalid parameters stop start-up with a message naming them.
+
+use crate::app::NodeSettings;
+use crate::params::load_config;
+use crate::ros::RosSettings;
+use bevt_core::TrackerSpec;
+use ros2_client::ServiceMapping;
+use serde_norway::Value;
+use std::collections::BTreeMap;
+use std::net::IpAddr;
+use std::time::Duration;
+use thiserror::Error;
+
+/// A start-up error.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum LaunchError {
+    /// Bad command line.
+    #[error("command line: {0}")]
+    Args(String),
+    /// Bad parameters file or parameter.
+    #[error("parameter {name}: {reason}")]
+    Param {
+        /// Parameter name.
+        name: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// Tracker configuration error.
+    #[error("tracker parameters: {0}")]
+    Tracker(#[from] crate::params::ParamsError),
+}
+
+/// Everything the node needs to start.
+#[derive(Debug, Clone)]
+pub struct Launch {
+    /// ROS layer settings.
+    pub ros: RosSettings,
+    /// Node logic settings.
+    pub node: NodeSettings,
+    /// Tracker specification.
+    pub tracker: TrackerSpec,
+    /// Run the built-in demo (synthetic camera + ground station).
+    pub demo: bool,
+    /// Demo duration.
+    pub demo_duration: Duration,
+}
+
+fn param_err(name: &str, reason: impl Into<String>) -> LaunchError {
+    LaunchError::Param {
+        name: name.to_string(),
+        reason: reason.into(),
+    }
+}
+
+/// Flattens a YAML mapping into dotted names.
+fn flatten(prefix: &str, v: &Value, out: &mut BTreeMap<String, Value>) {
+    match v {
+        Value::Mapping(m) => {
+            for (k, v) in m {
+                let k = match k {
+                    Value::String(s) => s.clone(),
+                    other => format!("{other:?}"),
+                };
+                let name = if prefix.is_empty() {
+                    k
+                } else {
+                    format!("{prefix}.{k}")
+                };
+                flatten(&name, v, out);
+            }
+        }
+        other => {
+            out.insert(prefix.to_string(), other.clone());
+        }
+    }
+}
+
+/// Reads `ros__parameters` for `node_name` (or `/**`) from a parameters file's text.
+pub fn params_from_file(
+    text: &str,
+    node_name: &str,
+) -> Result<BTreeMap<String, Value>, LaunchError> {
+    let doc: Value =
+        serde_norway::from_str(text).map_err(|e| param_err("--params-file", e.to_string()))?;
+    let mut out = BTreeMap::new();
+    let Value::Mapping(top) = &doc else {
+        return Err(param_err(
+            "--params-file",
+            "expected `node_name: ros__parameters: {...}`",
+        ));
+    };
+    for (k, v) in top {
+        let key = k.as_str().unwrap_or_default().trim_start_matches('/');
+        if key == "**" || key == node_name || key.ends_with(&format!("/{node_name}")) {
+            let params = v
+                .get("ros__parameters")
+                .ok_or_else(|| param_err(key, "missing ros__parameters"))?;
+            flatten("", params, &mut out);
+        }
+    }
+    Ok(out)
+}
+
+/// Builds the launch configuration from arguments (without the program name) and the
+/// environment lookup `env`.
+///
+/// # Errors
+/// [`LaunchError`] naming the argument or parameter at fault.
+pub fn launch_from_args(
+    args: &[String],
+    env: impl Fn(&str) -> Option<String>,
+) -> Result<Launch, LaunchError> {
+    let mut demo = false;
+    let mut demo_duration = Duration::from_secs(10);
+    let mut files = Vec::new();
+    let mut sets: Vec<(String, String)> = Vec::new();
+    let mut remaps = Vec::new();
+    let mut it = args.iter();
+    let mut ros = false;
+    while let Some(a) = it.next() {
+        let mut next = |what: &str| {
+            it.next()
+                .cloned()
+                .ok_or_else(|| LaunchError::Args(format!("{what} needs a value")))
+        };
+        match a.as_str() {
+            "--ros-args" => ros = true,
+            "--" => ros = false,
+            "--demo" if !ros => demo = true,
+            "--duration" if !ros => {
+                let v = next("--duration")?;
+                let s: f64 = v
+                    .parse()
+                    .map_err(|_| LaunchError::Args(format!("--duration {v:?}: not a number")))?;
+                if !(s.is_finite() && s > 0.0) {
+                    return Err(LaunchError::Args("--duration must be positive".into()));
+                }
+                demo_duration = Duration::from_secs_f64(s);
+            }
+            "--params-file" if ros => files.push(next("--params-file")?),
+            "-p" | "--param" if ros => {
+                let v = next("-p")?;
+                let (k, val) = v
+                    .split_once(":=")
+                    .ok_or_else(|| LaunchError::Args(format!("-p {v:?}: expected name:=value")))?;
+                sets.push((k.to_string(), val.to_string()));
+            }
+            "-r" | "--remap" if ros => {
+                let v = next("-r")?;
+                let (k, val) = v
+                    .split_once(":=")
+                    .ok_or_else(|| LaunchError::Args(format!("-r {v:?}: expected from:=to")))?;
+                remaps.push((k.to_string(), val.to_string()));
+            }
+            "--log-level" if ros => {
+                next("--log-level")?;
+            }
+            "--enclave" if ros => {
+                next("--enclave")?;
+            }
+            other => return Err(LaunchError::Args(format!("unknown argument {other:?}"))),
+        }
+    }
+    let mut ros_settings = RosSettings::default();
+    let mut node = NodeSettings::default();
+    let mut topic_remaps = Vec::new();
+    for (from, to) in remaps {
+        match from.as_str() {
+            "__ns" => ros_settings.namespace = to,
+            "__node" | "__name" => ros_settings.node_name = to,
+            _ => topic_remaps.push((from, to)),
+        }
+    }
+    ros_settings.remaps = topic_remaps;
+    node.node_name = ros_settings.node_name.clone();
+    let mut params = BTreeMap::new();
+    for f in &files {
+        let text = std::fs::read_to_string(f)
+            .map_err(|e| param_err("--params-file", format!("{f}: {e}")))?;
+        params.extend(params_from_file(&text, &ros_settings.node_name)?);
+    }
+    for (k, v) in sets {
+        let val: Value = serde_norway::from_str(&v).map_err(|e| param_err(&k, e.to_string()))?;
+        params.insert(k, val);
+    }
+    // Environment first, parameters override it.
+    if let Some(d) = env("ROS_DOMAIN_ID").filter(|s| !s.trim().is_empty()) {
+        ros_settings.domain_id = d
+            .trim()
+            .parse()
+            .ok()
+            .filter(|v: &u16| *v <= 232)
+            .ok_or_else(|| {
+                param_err("ROS_DOMAIN_ID", format!("{d:?} is not a domain id 0..=232"))
+            })?;
+    }
+    if env("ROS_LOCALHOST_ONLY").as_deref() == Some("1") {
+        ros_settings.networks = vec![IpAddr::from([127, 0, 0, 1])];
+    }
+    let mut tracker_sets = Vec::new();
+    for (k, v) in &params {
+        let as_f64 = || v.as_f64().ok_or_else(|| param_err(k, "expected a number"));
+        let as_u64 = || {
+            v.as_u64()
+                .ok_or_else(|| param_err(k, "expected a non-negative integer"))
+        };
+        match k.as_str() {
+            "domain_id" => {
+                ros_settings.domain_id = u16::try_from(as_u64()?)
+                    .ok()
+                    .filter(|d| *d <= 232)
+                    .ok_or_else(|| param_err(k, "expected 0..=232"))?
+            }
+            "network_interfaces" => {
+                let list = v
+                    .as_sequence()
+                    .ok_or_else(|| param_err(k, "expected a list of addresses"))?;
+                ros_settings.networks = list
+                    .iter()
+                    .map(|a| {
+                        a.as_str()
+                            .and_then(|s| s.parse::<IpAddr>().ok())
+                            .ok_or_else(|| param_err(k, format!("{a:?} is not an IP address")))
+                    })
+                    .collect::<Result<_, _>>()?;
+            }
+            "service_mapping" => {
+                ros_settings.service_mapping = match v.as_str() {
+                    Some("enhanced") => ServiceMapping::Enhanced,
+                    Some("cyclone") => ServiceMapping::Cyclone,
+                    _ => {
+                        return Err(param_err(
+                            k,
+                            "expected enhanced (Fast DDS) or cyclone (rmw_cyclonedds)",
+                        ))
+                    }
+                }
+            }
+            "reinit_buffer_frames" => {
+                node.reinit_buffer_frames = usize::try_from(as_u64()?)
+                    .ok()
+                    .filter(|n| (1..=1000).contains(n))
+                    .ok_or_else(|| param_err(k, "expected 1..=1000"))?
+            }
+            "stale_timeout_s" => {
+                let s = as_f64()?;
+                if !(s.is_finite() && s > 0.0) {
+                    return Err(param_err(k, "expected a positive number of seconds"));
+                }
+                node.stale_timeout = Duration::from_secs_f64(s);
+            }
+            "diagnostics_period_s" => {
+                let s = as_f64()?;
+                if !(s.is_finite() && s > 0.0) {
+                    return Err(param_err(k, "expected a positive number of seconds"));
+                }
+                ros_settings.diagnostics_period = Duration::from_secs_f64(s);
+            }
+            "class_id" => {
+                node.class_id = v
+                    .as_str()
+                    .ok_or_else(|| param_err(k, "expected a string"))?
+                    .to_string()
+            }
+            name if name.starts_with("tracker.") => {
+                let text = serde_norway::to_string(v).map_err(|e| param_err(k, e.to_string()))?;
+                tracker_sets.push(format!("{}={}", &name["tracker.".len()..], text.trim()));
+            }
+            _ => return Err(param_err(k, "unknown parameter")),
+        }
+    }
+    let tracker = load_config(None, &tracker_sets)?;
+    Ok(Launch {
+        ros: ros_settings,
+        node,
+        tracker,
+        demo,
+        demo_duration,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(s: &str) -> Vec<String> {
+        s.split_whitespace().map(String::from).collect()
+    }
+
+    #[test]
+    fn ros_args_params_remaps_and_env_are_applied() {
+        let dir = std::env::temp_dir().join(format!("bevt_params_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("p.yaml");
+        std::fs::write(
+            &f,
+            "bevt_node:\n  ros__parameters:\n    domain_id: 7\n    service_mapping: cyclone\n    tracker:\n      admm:\n        penalty: none\n",
+        )
+        .unwrap();
+        let a = args(&format!(
+            "--ros-args --params-file {} -p reinit_buffer_frames:=5 -p tracker.detection.number_of_scales:=3 -r __ns:=/drone -r image_raw:=/cam/image",
+            f.display()
+        ));
+        let l = launch_from_args(&a, |k| (k == "ROS_DOMAIN_ID").then(|| "3".to_string())).unwrap();
+        assert_eq!(l.ros.domain_id, 7, "the parameter overrides ROS_DOMAIN_ID");
+        assert_eq!(l.ros.service_mapping, ServiceMapping::Cyclone);
+        assert_eq!(l.ros.namespace, "/drone");
+        assert_eq!(
+            l.ros.remaps,
+            vec![("image_raw".to_string(), "/cam/image".to_string())]
+        );
+        assert_eq!(l.node.reinit_buffer_frames, 5);
+        assert_eq!(l.tracker.config.detection.number_of_scales, 3);
+        assert_eq!(
+            l.tracker.config.admm.penalty,
+            bevt_core::filter::admm::PenaltyKind::None
+        );
+        let l = launch_from_args(&[], |k| (k == "ROS_DOMAIN_ID").then(|| "3".to_string())).unwrap();
+        assert_eq!(l.ros.domain_id, 3);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn unknown_and_invalid_parameters_are_named() {
+        let none = |_: &str| None;
+        for (a, what) in [
+            ("--ros-args -p colour:=red", "colour"),
+            ("--ros-args -p domain_id:=999", "domain_id"),
+            ("--ros-args -p service_mapping:=basic", "service_mapping"),
+            (
+                "--ros-args -p network_interfaces:=[nonsense]",
+                "network_interfaces",
+            ),
+            (
+                "--ros-args -p tracker.admm.iterations:=0",
+                "admm.iterations",
+            ),
+            ("--bogus", "--bogus"),
+            ("--ros-args -p", "-p"),
+        ] {
+            let e = launch_from_args(&args(a), none).unwrap_err().to_string();
+            assert!(e.contains(what), "{a}: {e}");
+        }
+        let e = launch_from_args(&[], |k| (k == "ROS_DOMAIN_ID").then(|| "x".into())).unwrap_err();
+        assert!(e.to_string().contains("ROS_DOMAIN_ID"));
+    }
+
+    #[test]
+    fn the_shipped_parameters_file_loads() {
+        let text = include_str!("../../config/node.yaml");
+        let p = params_from_file(text, "bevt_node").unwrap();
+        assert!(p.contains_key("domain_id"));
+        let dir = std::env::temp_dir().join(format!("bevt_params2_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("node.yaml");
+        std::fs::write(&f, text).unwrap();
+        let l = launch_from_args(
+            &args(&format!("--ros-args --params-file {}", f.display())),
+            |_| None,
+        )
+        .unwrap();
+        assert_eq!(l.tracker.config, bevt_core::TrackerConfig::default());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

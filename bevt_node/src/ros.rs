@@ -1,0 +1,436 @@
+//! The ROS 2 layer over `ros2-client` (pure Rust, RustDDS): names, QoS and threads in one
+//! place; all decisions are in [`crate::app::NodeCore`].
+//!
+//! Threads: `bevt-dds-rx` receives camera messages and keeps only the newest one in a
+//! slot (counting the ones it replaces as dropped); the calling thread runs the tracker
+//! on the newest frame, answers services, reads the `init` topic and publishes. The
+//! tracker therefore never falls behind the camera, and DDS reception never waits for it.
+
+use crate::app::{CameraMsg, FrameOutputs, NodeCore};
+use bevt_msgs::bevt::{ReinitRequest, ReinitResponse, TrackStatus};
+use bevt_msgs::diagnostic_msgs::DiagnosticArray;
+use bevt_msgs::sensor_msgs::{CompressedImage, Image};
+use bevt_msgs::std_srvs::{TriggerRequest, TriggerResponse};
+use bevt_msgs::vision_msgs::{Detection2D, Detection2DArray};
+use bevt_msgs::RosType;
+use futures::StreamExt;
+use ros2_client::dds::rustdds::DomainParticipantBuilder;
+use ros2_client::{
+    Context, MessageTypeName, Name, Node, NodeName, NodeOptions, QosProfile, ServiceMapping,
+    ServiceTypeName,
+};
+use std::net::IpAddr;
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
+use thiserror::Error;
+
+/// Topic and service names, relative to the node's namespace unless they start with `/`.
+pub mod names {
+    /// Raw camera images in.
+    pub const IMAGE: &str = "image_raw";
+    /// Compressed camera images in.
+    pub const IMAGE_COMPRESSED: &str = "image_raw/compressed";
+    /// Initial boxes in (`vision_msgs/Detection2D`, header stamp = the frame's).
+    pub const INIT: &str = "init";
+    /// Boxes out.
+    pub const DETECTIONS: &str = "detections";
+    /// Status out.
+    pub const TRACK_STATUS: &str = "track_status";
+    /// Diagnostics out.
+    pub const DIAGNOSTICS: &str = "/diagnostics";
+    /// Re-initialisation service.
+    pub const REINIT: &str = "reinit";
+    /// Stop service.
+    pub const STOP: &str = "stop";
+}
+
+/// How long the worker waits for a frame before serving requests and timers again.
+const WORKER_WAIT: Duration = Duration::from_millis(10);
+
+/// Errors of the ROS layer.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum RosError {
+    /// A topic or service name is invalid.
+    #[error("invalid ROS name {0:?}: {1}")]
+    Name(String, String),
+    /// DDS entity creation failed.
+    #[error("cannot create {what}: {reason}")]
+    Create {
+        /// The entity.
+        what: String,
+        /// DDS error.
+        reason: String,
+    },
+}
+
+/// Settings of the ROS layer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RosSettings {
+    /// Node name.
+    pub node_name: String,
+    /// Node namespace (`/` for none).
+    pub namespace: String,
+    /// DDS domain.
+    pub domain_id: u16,
+    /// Network interfaces (addresses) DDS may use; empty = all. Default loopback only.
+    pub networks: Vec<IpAddr>,
+    /// Service wire mapping: `Enhanced` for Fast DDS peers, `Cyclone` for rmw_cyclonedds.
+    pub service_mapping: ServiceMapping,
+    /// Name remappings `from → to` (exact match on the names in [`names`]).
+    pub remaps: Vec<(String, String)>,
+    /// Diagnostics period.
+    pub diagnostics_period: Duration,
+}
+
+impl Default for RosSettings {
+    fn default() -> Self {
+        Self {
+            node_name: "bevt_node".into(),
+            namespace: "/".into(),
+            domain_id: 0,
+            networks: vec![IpAddr::from([127, 0, 0, 1])],
+            service_mapping: ServiceMapping::Enhanced,
+            remaps: Vec::new(),
+            diagnostics_period: Duration::from_secs(1),
+        }
+    }
+}
+
+/// Resolves a name like `image_raw/compressed` or `/diagnostics` (after remapping) to an
+/// absolute name in the node's namespace. (Resolving here, rather than leaving relative
+/// names to ros2-client, avoids its `rt//name` for nodes in the root namespace.)
+pub fn ros_name(settings: &RosSettings, name: &str) -> Result<Name, RosError> {
+    let name = settings
+        .remaps
+        .iter()
+        .find(|(from, _)| from == name)
+        .map_or(name, |(_, to)| to.as_str());
+    let full = if name.starts_with('/') {
+        name.to_string()
+    } else {
+        format!("{}/{}", settings.namespace.trim_end_matches('/'), name)
+    };
+    let (ns, base) = full.rsplit_once('/').unwrap_or(("", &full));
+    Name::new(if ns.is_empty() { "/" } else { ns }, base)
+        .map_err(|e| RosError::Name(name.to_string(), format!("{e:?}")))
+}
+
+/// A DDS context restricted to `settings.networks` (all interfaces when empty).
+pub fn context(settings: &RosSettings) -> Result<Context, RosError> {
+    let mut b = DomainParticipantBuilder::new(settings.domain_id);
+    if !settings.networks.is_empty() {
+        b = b.with_only_networks(settings.networks.clone());
+    }
+    let dp = b.build().map_err(|e| RosError::Create {
+        what: format!("DDS participant on domain {}", settings.domain_id),
+        reason: format!("{e:?}"),
+    })?;
+    Context::from_domain_participant(dp).map_err(|e| RosError::Create {
+        what: "ROS context".into(),
+        reason: format!("{e:?}"),
+    })
+}
+
+fn create_err(what: &str) -> impl Fn(ros2_client::CreateError) -> RosError + '_ {
+    move |e| RosError::Create {
+        what: what.to_string(),
+        reason: format!("{e:?}"),
+    }
+}
+
+/// The QoS of camera input: best effort, keep last 1 (matches reliable and best-effort
+/// cameras).
+pub fn camera_qos() -> QosProfile {
+    QosProfile::subscription_default()
+}
+
+/// The QoS of outputs: reliable, keep last 10.
+pub fn output_qos() -> QosProfile {
+    QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast { depth: 10 })
+}
+
+fn type_of<T: RosType>() -> MessageTypeName {
+    MessageTypeName::new(T::PACKAGE, T::NAME)
+}
+
+/// The newest camera message, and how many were replaced before the worker took one.
+#[derive(Default)]
+struct Slot {
+    newest: Mutex<Option<Incoming>>,
+    ready: Condvar,
+    dropped: AtomicU32,
+}
+
+enum Incoming {
+    Raw(Image, Instant),
+    Compressed(CompressedImage, Instant),
+    Error(String),
+}
+
+impl Slot {
+    fn put(&self, item: Incoming) {
+        if let Ok(mut g) = self.newest.lock() {
+            if g.replace(item).is_some() {
+                self.dropped.fetch_add(1, Ordering::Relaxed);
+            }
+            self.ready.notify_one();
+        }
+    }
+
+    fn take(&self, wait: Duration) -> Option<Incoming> {
+        let g = self.newest.lock().ok()?;
+        let (mut g, _) = self
+            .ready
+            .wait_timeout_while(g, wait, |v| v.is_none())
+            .ok()?;
+        g.take()
+    }
+}
+
+/// Runs the node until `shutdown` is set. `observe` sees every output set (for logs/tests).
+///
+/// # Errors
+/// [`RosError`] when DDS entities cannot be created.
+pub fn run(
+    mut core: NodeCore,
+    settings: &RosSettings,
+    shutdown: Arc<AtomicBool>,
+    mut observe: impl FnMut(&FrameOutputs),
+) -> Result<(), RosError> {
+    let ctx = context(settings)?;
+    let node_name = NodeName::new(&settings.namespace, &settings.node_name)
+        .map_err(|e| RosError::Name(settings.node_name.clone(), format!("{e:?}")))?;
+    let mut node: Node = ctx
+        .new_node(node_name, NodeOptions::new().enable_rosout(true))
+        .map_err(|e| RosError::Create {
+            what: "node".into(),
+            reason: format!("{e:?}"),
+        })?;
+    let topic = |node: &Node, name: &str, ty: MessageTypeName, qos: &QosProfile| {
+        node.create_topic(&ros_name(settings, name)?, ty, qos)
+            .map_err(|e| RosError::Create {
+                what: format!("topic {name}"),
+                reason: format!("{e:?}"),
+            })
+    };
+    let cq = camera_qos();
+    let oq = output_qos();
+    let t_img = topic(&node, names::IMAGE, type_of::<Image>(), &cq)?;
+    let t_cmp = topic(
+        &node,
+        names::IMAGE_COMPRESSED,
+        type_of::<CompressedImage>(),
+        &cq,
+    )?;
+    let t_init = topic(
+        &node,
+        names::INIT,
+        MessageTypeName::new("vision_msgs", "Detection2D"),
+        &oq,
+    )?;
+    let t_det = topic(&node, names::DETECTIONS, type_of::<Detection2DArray>(), &oq)?;
+    let t_status = topic(&node, names::TRACK_STATUS, type_of::<TrackStatus>(), &oq)?;
+    let t_diag = topic(&node, names::DIAGNOSTICS, type_of::<DiagnosticArray>(), &oq)?;
+    let sub_img = node
+        .create_subscription::<Image>(&t_img, Some(cq.clone()))
+        .map_err(create_err("image subscription"))?;
+    let sub_cmp = node
+        .create_subscription::<CompressedImage>(&t_cmp, Some(cq.clone()))
+        .map_err(create_err("compressed image subscription"))?;
+    let sub_init = node
+        .create_subscription::<Detection2D>(&t_init, Some(oq.clone()))
+        .map_err(create_err("init subscription"))?;
+    let pub_det = node
+        .create_publisher::<Detection2DArray>(&t_det, Some(oq.clone()))
+        .map_err(create_err("detections publisher"))?;
+    let pub_status = node
+        .create_publisher::<TrackStatus>(&t_status, Some(oq.clone()))
+        .map_err(create_err("status publisher"))?;
+    let pub_diag = node
+        .create_publisher::<DiagnosticArray>(&t_diag, Some(oq.clone()))
+        .map_err(create_err("diagnostics publisher"))?;
+    let sq =
+        QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast { depth: 10 });
+    let srv_reinit = node
+        .create_server::<ReinitRequest, ReinitResponse>(
+            settings.service_mapping,
+            &ros_name(settings, names::REINIT)?,
+            &ServiceTypeName::new("bevt_msgs", "Reinit"),
+            sq.clone(),
+            sq.clone(),
+        )
+        .map_err(create_err("reinit service"))?;
+    let srv_stop = node
+        .create_server::<TriggerRequest, TriggerResponse>(
+            settings.service_mapping,
+            &ros_name(settings, names::STOP)?,
+            &ServiceTypeName::new("std_srvs", "Trigger"),
+            sq.clone(),
+            sq.clone(),
+        )
+        .map_err(create_err("stop service"))?;
+
+    // Reception thread: newest frame wins.
+    let slot = Arc::new(Slot::default());
+    let rx_slot = slot.clone();
+    let rx_stop = shutdown.clone();
+    std::thread::Builder::new()
+        .name("bevt-dds-rx".into())
+        .spawn(move || {
+            futures::executor::block_on(async move {
+                let raw = sub_img.async_stream().map(|r| match r {
+                    Ok((m, _)) => Incoming::Raw(m, Instant::now()),
+                    Err(e) => Incoming::Error(format!("cannot read an image message: {e:?}")),
+                });
+                let cmp = sub_cmp.async_stream().map(|r| match r {
+                    Ok((m, _)) => Incoming::Compressed(m, Instant::now()),
+                    Err(e) => {
+                        Incoming::Error(format!("cannot read a compressed image message: {e:?}"))
+                    }
+                });
+                let mut both = std::pin::pin!(futures::stream::select(raw, cmp));
+                while let Some(item) = both.next().await {
+                    if rx_stop.load(Ordering::Relaxed) {
+                        break;
+                    }
+                    rx_slot.put(item);
+                }
+            })
+        })
+        .map_err(|e| RosError::Create {
+            what: "reception thread".into(),
+            reason: e.to_string(),
+        })?;
+
+    let log = |node: &Node, level: ros2_client::log::LogLevel, text: &str| {
+        ros2_client::rosout!(*node, level, "{}", text);
+        eprintln!("[{:?}] [{}]: {text}", level, settings.node_name);
+    };
+    log(
+        &node,
+        ros2_client::log::LogLevel::Info,
+        "started: waiting for images and an initial box",
+    );
+    let publish = |o: &FrameOutputs| {
+        // A failed publish (no memory, shut down) is logged by RustDDS; the node continues.
+        let _ = pub_det.publish(o.detections.clone());
+        let _ = pub_status.publish(o.status.clone());
+    };
+    let mut next_diag = Instant::now();
+    while !shutdown.load(Ordering::Relaxed) {
+        while let Ok(Some((id, req))) = srv_reinit.receive_request() {
+            let (resp, out) = core.on_reinit(&req);
+            log(
+                &node,
+                if resp.success {
+                    ros2_client::log::LogLevel::Info
+                } else {
+                    ros2_client::log::LogLevel::Warn
+                },
+                &format!("reinit: {}", resp.message),
+            );
+            if let Some(o) = out {
+                publish(&o);
+                observe(&o);
+            }
+            let _ = srv_reinit.send_response(id, resp);
+        }
+        while let Ok(Some((id, _))) = srv_stop.receive_request() {
+            let resp = core.on_stop();
+            log(
+                &node,
+                ros2_client::log::LogLevel::Info,
+                &format!("stop: {}", resp.message),
+            );
+            let _ = srv_stop.send_response(id, resp);
+        }
+        while let Ok(Some((det, _))) = sub_init.take() {
+            let b = crate::convert::bbox_from_detection(&det);
+            let req = ReinitRequest {
+                x: b.x as f64,
+                y: b.y as f64,
+                width: b.w as f64,
+                height: b.h as f64,
+                stamp: det.header.stamp,
+                frame_id: det.header.frame_id.clone(),
+            };
+            let (resp, out) = core.on_reinit(&req);
+            log(
+                &node,
+                if resp.success {
+                    ros2_client::log::LogLevel::Info
+                } else {
+                    ros2_client::log::LogLevel::Warn
+                },
+                &format!("init topic: {}", resp.message),
+            );
+            if let Some(o) = out {
+                publish(&o);
+                observe(&o);
+            }
+        }
+        match slot.take(WORKER_WAIT) {
+            Some(Incoming::Raw(m, t)) => {
+                core.add_dropped(slot.dropped.swap(0, Ordering::Relaxed));
+                let o = core.on_image(CameraMsg::Raw(&m), t);
+                publish(&o);
+                observe(&o);
+            }
+            Some(Incoming::Compressed(m, t)) => {
+                core.add_dropped(slot.dropped.swap(0, Ordering::Relaxed));
+                let o = core.on_image(CameraMsg::Compressed(&m), t);
+                publish(&o);
+                observe(&o);
+            }
+            Some(Incoming::Error(e)) => log(&node, ros2_client::log::LogLevel::Warn, &e),
+            None => {}
+        }
+        let now = Instant::now();
+        if now >= next_diag {
+            next_diag = now + settings.diagnostics_period;
+            if let Some(s) = core.on_tick(now) {
+                let _ = pub_status.publish(s);
+            }
+            let _ = pub_diag.publish(core.diagnostics());
+        }
+    }
+    log(&node, ros2_client::log::LogLevel::Info, "shutting down");
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_resolve_remaps_and_namespaces() {
+        let mut s = RosSettings::default();
+        assert!(ros_name(&s, names::IMAGE).is_ok());
+        assert!(ros_name(&s, names::IMAGE_COMPRESSED).is_ok());
+        assert!(ros_name(&s, names::DIAGNOSTICS).is_ok());
+        s.remaps
+            .push(("image_raw".into(), "/camera/color/image_raw".into()));
+        let n = ros_name(&s, names::IMAGE).unwrap();
+        let node = NodeName::new("/drone", "bevt_node").unwrap();
+        assert_eq!(n.to_dds_name("rt", &node, ""), "rt/camera/color/image_raw");
+        let root = NodeName::new("/", "bevt_node").unwrap();
+        assert_eq!(
+            ros_name(&s, names::DETECTIONS)
+                .unwrap()
+                .to_dds_name("rt", &root, ""),
+            "rt/detections"
+        );
+        s.namespace = "/drone".into();
+        let d = ros_name(&s, names::DETECTIONS).unwrap();
+        assert_eq!(d.to_dds_name("rt", &node, ""), "rt/drone/detections");
+        let c = ros_name(&s, names::IMAGE_COMPRESSED).unwrap();
+        assert_eq!(
+            c.to_dds_name("rt", &node, ""),
+            "rt/drone/image_raw/compressed"
+        );
+        s.remaps.push(("detections".into(), "bad name!".into()));
+        assert!(ros_name(&s, names::DETECTIONS).is_err());
+    }
+}

@@ -1,0 +1,213 @@
+//! A synthetic camera and a simulated ground station over DDS, for the demo, the
+//! integration tests and the latency benchmark: the same code a real deployment's
+//! peers would run, with exact ground truth.
+
+use crate::ros::{camera_qos, context, output_qos, ros_name, RosError, RosSettings};
+use bevt_core::eval::synth::SynthParams;
+use bevt_core::BBox;
+use bevt_msgs::bevt::{ReinitRequest, ReinitResponse};
+use bevt_msgs::builtin_interfaces::Time;
+use bevt_msgs::sensor_msgs::Image;
+use bevt_msgs::std_msgs::Header;
+use bevt_msgs::vision_msgs::Detection2DArray;
+use bevt_msgs::RosType;
+use ros2_client::{
+    Client, Context, MessageTypeName, Node, NodeName, NodeOptions, ServiceTypeName, Subscription,
+};
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+/// Ground truth by image stamp (nanoseconds).
+pub type TruthLog = Arc<Mutex<BTreeMap<i64, BBox>>>;
+
+/// Truth entries kept.
+const TRUTH_KEEP: usize = 10_000;
+
+fn wall_stamp() -> Time {
+    let d = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .unwrap_or_default();
+    Time::from_nanos(d.as_nanos().min(i64::MAX as u128) as i64)
+}
+
+fn node(ctx: &Context, name: &str) -> Result<Node, RosError> {
+    let n = NodeName::new("/", name).map_err(|e| RosError::Name(name.into(), format!("{e:?}")))?;
+    ctx.new_node(n, NodeOptions::new())
+        .map_err(|e| RosError::Create {
+            what: format!("node {name}"),
+            reason: format!("{e:?}"),
+        })
+}
+
+/// Publishes a synthetic sequence as `sensor_msgs/Image` (rgb8) at `rate_hz` on the node's
+/// `image_raw` (as resolved by `settings`) until `stop`, looping over the sequence.
+/// Every frame's stamp (wall clock) and true box go into the returned log.
+///
+/// # Errors
+/// [`RosError`] when DDS entities cannot be created.
+pub fn spawn_camera(
+    settings: &RosSettings,
+    seq: SynthParams,
+    rate_hz: f64,
+    stop: Arc<AtomicBool>,
+) -> Result<(std::thread::JoinHandle<()>, TruthLog), RosError> {
+    let ctx = context(settings)?;
+    let mut cam = node(&ctx, "bevt_sim_camera")?;
+    // The node's input name, resolved in its namespace (absolute).
+    let abs = ros_name(settings, crate::ros::names::IMAGE)?;
+    let topic = cam
+        .create_topic(
+            &abs,
+            MessageTypeName::new(Image::PACKAGE, Image::NAME),
+            &camera_qos(),
+        )
+        .map_err(|e| RosError::Create {
+            what: "camera topic".into(),
+            reason: format!("{e:?}"),
+        })?;
+    let publisher = cam
+        .create_publisher::<Image>(&topic, Some(camera_qos()))
+        .map_err(|e| RosError::Create {
+            what: "camera publisher".into(),
+            reason: format!("{e:?}"),
+        })?;
+    let log: TruthLog = Arc::default();
+    let log2 = log.clone();
+    let period = Duration::from_secs_f64(1.0 / rate_hz.max(0.1));
+    let handle = std::thread::Builder::new()
+        .name("bevt-sim-camera".into())
+        .spawn(move || {
+            let _keep = (ctx, cam);
+            // Frames are rendered on first use and reused when the sequence loops.
+            let mut frames: Vec<bevt_core::eval::synth::SynthFrame> =
+                Vec::with_capacity(seq.frames);
+            let mut next = Instant::now();
+            let mut t = 0usize;
+            while !stop.load(Ordering::Relaxed) {
+                let i = t % seq.frames.max(1);
+                if i == frames.len() {
+                    frames.push(seq.frame(i));
+                }
+                let f = &frames[i];
+                let stamp = wall_stamp();
+                if let Ok(mut l) = log2.lock() {
+                    l.insert(stamp.as_nanos(), f.truth);
+                    while l.len() > TRUTH_KEEP {
+                        l.pop_first();
+                    }
+                }
+                let msg = Image {
+                    header: Header {
+                        stamp,
+                        frame_id: "sim_camera".into(),
+                    },
+                    height: seq.height as u32,
+                    width: seq.width as u32,
+                    encoding: "rgb8".into(),
+                    is_bigendian: 0,
+                    step: (seq.width * 3) as u32,
+                    data: f.rgb.clone(),
+                };
+                let _ = publisher.publish(msg);
+                t += 1;
+                next += period;
+                let now = Instant::now();
+                if next > now {
+                    std::thread::sleep(next - now);
+                } else {
+                    next = now;
+                }
+            }
+        })
+        .map_err(|e| RosError::Create {
+            what: "camera thread".into(),
+            reason: e.to_string(),
+        })?;
+    Ok((handle, log))
+}
+
+/// A ground station: calls `reinit` and watches `detections`.
+pub struct GroundStation {
+    _ctx: Context,
+    _node: Node,
+    client: Client<ReinitRequest, ReinitResponse>,
+    detections: Subscription<Detection2DArray>,
+}
+
+impl GroundStation {
+    /// Connects to the node described by `settings`.
+    ///
+    /// # Errors
+    /// [`RosError`] when DDS entities cannot be created.
+    pub fn new(settings: &RosSettings) -> Result<Self, RosError> {
+        let ctx = context(settings)?;
+        let mut n = node(&ctx, "bevt_sim_ground_station")?;
+        let abs = |rel: &str| ros_name(settings, rel);
+        let sq = output_qos();
+        let client = n
+            .create_client::<ReinitRequest, ReinitResponse>(
+                settings.service_mapping,
+                &abs(crate::ros::names::REINIT)?,
+                &ServiceTypeName::new("bevt_msgs", "Reinit"),
+                sq.clone(),
+                sq.clone(),
+            )
+            .map_err(|e| RosError::Create {
+                what: "reinit client".into(),
+                reason: format!("{e:?}"),
+            })?;
+        let topic = n
+            .create_topic(
+                &abs(crate::ros::names::DETECTIONS)?,
+                MessageTypeName::new(Detection2DArray::PACKAGE, Detection2DArray::NAME),
+                &sq,
+            )
+            .map_err(|e| RosError::Create {
+                what: "detections topic".into(),
+                reason: format!("{e:?}"),
+            })?;
+        let detections = n
+            .create_subscription::<Detection2DArray>(&topic, Some(sq))
+            .map_err(|e| RosError::Create {
+                what: "detections subscription".into(),
+                reason: format!("{e:?}"),
+            })?;
+        Ok(Self {
+            _ctx: ctx,
+            _node: n,
+            client,
+            detections,
+        })
+    }
+
+    /// Calls `reinit`, retrying the send until `timeout` (the first requests may be lost
+    /// while discovery completes). `None` on timeout.
+    pub fn reinit(&self, req: &ReinitRequest, timeout: Duration) -> Option<ReinitResponse> {
+        let end = Instant::now() + timeout;
+        while Instant::now() < end {
+            let Ok(id) = self.client.send_request(req.clone()) else {
+                std::thread::sleep(Duration::from_millis(50));
+                continue;
+            };
+            let retry = Instant::now() + Duration::from_millis(500);
+            while Instant::now() < retry.min(end) {
+                match self.client.receive_response() {
+                    Ok(Some((rid, resp))) if rid == id => return Some(resp),
+                    _ => std::thread::sleep(Duration::from_millis(5)),
+                }
+            }
+        }
+        None
+    }
+
+    /// Detections received so far (non-blocking).
+    pub fn take_detections(&self) -> Vec<Detection2DArray> {
+        let mut out = Vec::new();
+        while let Ok(Some((d, _))) = self.detections.take() {
+            out.push(d);
+        }
+        out
+    }
+}

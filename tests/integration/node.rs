@@ -1,0 +1,175 @@
+//! The ROS 2 node over real DDS (RustDDS on loopback), in-process: a synthetic camera
+//! publishes frames, a ground station calls `reinit` and reads `detections`. Each test uses
+//! its own DDS domain; every wait has a timeout.
+
+use bevt_core::eval::synth::SynthParams;
+use bevt_core::{BBox, TrackerConfig};
+use bevt_msgs::bevt::ReinitRequest;
+use bevt_msgs::builtin_interfaces::Time;
+use bevt_node::app::{NodeCore, NodeSettings};
+use bevt_node::convert::bbox_from_detection;
+use bevt_node::ros::{run, RosSettings};
+use bevt_node::sim::{spawn_camera, GroundStation, TruthLog};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// A domain per test and per process, so parallel tests and runs do not meet.
+fn domain(k: u16) -> u16 {
+    100 + (std::process::id() % 40) as u16 * 3 + k
+}
+
+struct Running {
+    stop: Arc<AtomicBool>,
+    node: Option<std::thread::JoinHandle<()>>,
+    camera: Option<std::thread::JoinHandle<()>>,
+    truth: TruthLog,
+    gs: GroundStation,
+}
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(h) = self.camera.take() {
+            let _ = h.join();
+        }
+        if let Some(h) = self.node.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+fn start(k: u16) -> Running {
+    let settings = RosSettings {
+        domain_id: domain(k),
+        ..RosSettings::default()
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    let core = NodeCore::new(
+        TrackerConfig::default().validate().unwrap(),
+        NodeSettings::default(),
+    );
+    let (s2, st2) = (settings.clone(), stop.clone());
+    let node = std::thread::Builder::new()
+        .name("bevt-node-under-test".into())
+        .spawn(move || run(core, &s2, st2, |_| {}).unwrap())
+        .unwrap();
+    let seq = SynthParams {
+        frames: 200,
+        ..SynthParams::default()
+    };
+    let (camera, truth) = spawn_camera(&settings, seq, 20.0, stop.clone()).unwrap();
+    let gs = GroundStation::new(&settings).unwrap();
+    Running {
+        stop,
+        node: Some(node),
+        camera: Some(camera),
+        truth,
+        gs,
+    }
+}
+
+/// Time for DDS discovery to match the node's subscription with the camera: frames
+/// before that are lost (first-sample loss), so an operator's stamp must be newer.
+const DISCOVERY: Duration = Duration::from_millis(1500);
+
+/// The truth of a frame about `age` old, once the camera has run for `age + DISCOVERY`.
+fn delayed_truth(r: &Running, age: Duration) -> (i64, BBox) {
+    let end = Instant::now() + Duration::from_secs(10);
+    loop {
+        {
+            let log = r.truth.lock().unwrap();
+            if let Some(&newest) = log.keys().next_back() {
+                let oldest = *log.keys().next().unwrap();
+                if newest - oldest > (age + DISCOVERY).as_nanos() as i64 {
+                    let (k, v) = log.range(newest - age.as_nanos() as i64..).next().unwrap();
+                    return (*k, *v);
+                }
+            }
+        }
+        assert!(Instant::now() < end, "the camera published nothing");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn request(b: BBox, stamp: i64) -> ReinitRequest {
+    ReinitRequest {
+        x: b.x as f64,
+        y: b.y as f64,
+        width: b.w as f64,
+        height: b.h as f64,
+        stamp: Time::from_nanos(stamp),
+        frame_id: String::new(),
+    }
+}
+
+/// Collects detections for `dur`; returns (count, count within `tol` px of the truth).
+fn collect(r: &Running, dur: Duration, tol: f32) -> (usize, usize) {
+    let end = Instant::now() + dur;
+    let (mut n, mut good) = (0, 0);
+    while Instant::now() < end {
+        for d in r.gs.take_detections() {
+            let Some(det) = d.detections.first() else {
+                continue;
+            };
+            n += 1;
+            let truth = r
+                .truth
+                .lock()
+                .unwrap()
+                .get(&d.header.stamp.as_nanos())
+                .copied();
+            if let Some(t) = truth {
+                if bbox_from_detection(det).center().distance(&t.center()) < tol {
+                    good += 1;
+                }
+            }
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    (n, good)
+}
+
+#[test]
+fn node_tracks_after_a_delayed_reinit_over_dds() {
+    let r = start(0);
+    let (stamp, b) = delayed_truth(&r, Duration::from_millis(300));
+    let resp =
+        r.gs.reinit(&request(b, stamp), Duration::from_secs(10))
+            .expect("reinit answered");
+    assert!(resp.success, "{}", resp.message);
+    assert!(resp.message.contains("fast-forwarded"), "{}", resp.message);
+    let (n, good) = collect(&r, Duration::from_secs(3), 5.0);
+    println!("{n} detections, {good} within 5 px of the truth");
+    assert!(n >= 20, "only {n} detections in 3 s at 20 Hz");
+    assert!(good * 10 >= n * 9, "{good}/{n} within 5 px");
+}
+
+#[test]
+fn bad_reinit_requests_are_refused_and_the_node_keeps_running() {
+    let r = start(1);
+    let (stamp, b) = delayed_truth(&r, Duration::from_millis(100));
+    for bad in [
+        request(BBox::new(f32::NAN, 1.0, 10.0, 10.0), 0),
+        request(BBox::new(10.0, 10.0, -5.0, 10.0), 0),
+        request(BBox::new(-900.0, -900.0, 20.0, 20.0), 0),
+        request(b, 12_345),
+    ] {
+        let resp =
+            r.gs.reinit(&bad, Duration::from_secs(10))
+                .expect("answered");
+        assert!(!resp.success, "{bad:?} accepted: {}", resp.message);
+        assert!(
+            resp.message.contains("current track kept"),
+            "{}",
+            resp.message
+        );
+    }
+    // Still alive and able to track.
+    let resp =
+        r.gs.reinit(&request(b, stamp), Duration::from_secs(10))
+            .expect("answered");
+    assert!(resp.success, "{}", resp.message);
+    let (n, good) = collect(&r, Duration::from_secs(2), 5.0);
+    assert!(n >= 10 && good * 10 >= n * 9, "{good}/{n}");
+}
