@@ -5,7 +5,7 @@
 use crate::ros::{camera_qos, context, output_qos, ros_name, RosError, RosSettings};
 use bevt_core::eval::synth::SynthParams;
 use bevt_core::BBox;
-use bevt_msgs::bevt::{ReinitRequest, ReinitResponse};
+use bevt_msgs::bevt::{ReinitRequest, ReinitResponse, TrackStatus};
 use bevt_msgs::builtin_interfaces::Time;
 use bevt_msgs::sensor_msgs::Image;
 use bevt_msgs::std_msgs::Header;
@@ -25,7 +25,8 @@ pub type TruthLog = Arc<Mutex<BTreeMap<i64, BBox>>>;
 /// Truth entries kept.
 const TRUTH_KEEP: usize = 10_000;
 
-fn wall_stamp() -> Time {
+/// The wall clock as a ROS stamp (what the synthetic camera stamps frames with).
+pub fn wall_stamp() -> Time {
     let d = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .unwrap_or_default();
@@ -134,6 +135,7 @@ pub struct GroundStation {
     _node: Node,
     client: Client<ReinitRequest, ReinitResponse>,
     detections: Subscription<Detection2DArray>,
+    status: Subscription<TrackStatus>,
 }
 
 impl GroundStation {
@@ -169,9 +171,25 @@ impl GroundStation {
                 reason: format!("{e:?}"),
             })?;
         let detections = n
-            .create_subscription::<Detection2DArray>(&topic, Some(sq))
+            .create_subscription::<Detection2DArray>(&topic, Some(sq.clone()))
             .map_err(|e| RosError::Create {
                 what: "detections subscription".into(),
+                reason: format!("{e:?}"),
+            })?;
+        let st = n
+            .create_topic(
+                &abs(crate::ros::names::TRACK_STATUS)?,
+                MessageTypeName::new(TrackStatus::PACKAGE, TrackStatus::NAME),
+                &sq,
+            )
+            .map_err(|e| RosError::Create {
+                what: "status topic".into(),
+                reason: format!("{e:?}"),
+            })?;
+        let status = n
+            .create_subscription::<TrackStatus>(&st, Some(sq))
+            .map_err(|e| RosError::Create {
+                what: "status subscription".into(),
                 reason: format!("{e:?}"),
             })?;
         Ok(Self {
@@ -179,6 +197,7 @@ impl GroundStation {
             _node: n,
             client,
             detections,
+            status,
         })
     }
 
@@ -200,6 +219,15 @@ impl GroundStation {
             }
         }
         None
+    }
+
+    /// Track statuses received so far (non-blocking).
+    pub fn take_status(&self) -> Vec<TrackStatus> {
+        let mut out = Vec::new();
+        while let Ok(Some((d, _))) = self.status.take() {
+            out.push(d);
+        }
+        out
     }
 
     /// Detections received so far (non-blocking).
