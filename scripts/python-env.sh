@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Creates (once) the project-local Python environment used by test tooling: rosbags (the
-# reference CDR serializer for the golden message files). Prints the interpreter path.
+# reference CDR serializer for the golden files) and cyclonedds (an independent DDS peer
+# for the interop test). Prints the interpreter path.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=.venv

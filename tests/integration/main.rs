@@ -2,6 +2,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // setup helpers outside #[test] fns
 
 mod bad_input;
+mod interop;
 mod node;
 mod real_data;
 mod synthetic;
