@@ -22,6 +22,9 @@ use bevt_msgs::vision_msgs::Detection2DArray;
 use std::collections::VecDeque;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
+/// Line thickness of the debug image's box, pixels.
+const DEBUG_LINE_PX: i64 = 2;
+
 /// Settings of the node logic.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NodeSettings {
@@ -415,6 +418,70 @@ impl NodeCore {
         None
     }
 
+    /// The newest frame with the current box drawn (green: learned, yellow: low consensus)
+    /// and a consensus bar above it (its length is the consensus score × box width), in the
+    /// camera's own encoding. `None` before the first usable frame.
+    pub fn debug_image(&self) -> Option<Image> {
+        let f = self.buffer.back()?;
+        let (encoding, bpp) = match f.format {
+            PixelFormat::Rgb8 => ("rgb8", 3),
+            PixelFormat::Bgr8 => ("bgr8", 3),
+            PixelFormat::Rgba8 => ("rgba8", 4),
+            PixelFormat::Bgra8 => ("bgra8", 4),
+            PixelFormat::Mono8 => ("mono8", 1),
+        };
+        let mut data = f.data.clone();
+        if let (Some(o), true) = (self.last_output, self.tracker.is_initialized()) {
+            let rgb = if o.learned {
+                [40u8, 220, 40]
+            } else {
+                [240, 200, 0]
+            };
+            let px: Vec<u8> = match f.format {
+                PixelFormat::Rgb8 => rgb.to_vec(),
+                PixelFormat::Bgr8 => vec![rgb[2], rgb[1], rgb[0]],
+                PixelFormat::Rgba8 => vec![rgb[0], rgb[1], rgb[2], 255],
+                PixelFormat::Bgra8 => vec![rgb[2], rgb[1], rgb[0], 255],
+                PixelFormat::Mono8 => vec![255],
+            };
+            let (w, h, stride) = (f.width as i64, f.height as i64, f.stride);
+            let mut put = |x: i64, y: i64| {
+                if (0..w).contains(&x) && (0..h).contains(&y) {
+                    let i = y as usize * stride + x as usize * bpp;
+                    data[i..i + bpp].copy_from_slice(&px);
+                }
+            };
+            let b = o.bbox;
+            let (x0, y0) = (b.x.round() as i64, b.y.round() as i64);
+            let (x1, y1) = ((b.x + b.w).round() as i64, (b.y + b.h).round() as i64);
+            for t in 0..DEBUG_LINE_PX {
+                for x in x0..=x1 {
+                    put(x, y0 + t);
+                    put(x, y1 - t);
+                }
+                for y in y0..=y1 {
+                    put(x0 + t, y);
+                    put(x1 - t, y);
+                }
+            }
+            let bar = x0 + ((x1 - x0) as f32 * o.consensus.clamp(0.0, 1.0)).round() as i64;
+            for y in (y0 - 3 * DEBUG_LINE_PX)..(y0 - DEBUG_LINE_PX) {
+                for x in x0..bar {
+                    put(x, y);
+                }
+            }
+        }
+        Some(Image {
+            header: f.header.clone(),
+            height: f.height as u32,
+            width: f.width as u32,
+            encoding: encoding.into(),
+            is_bigendian: 0,
+            step: f.stride as u32,
+            data,
+        })
+    }
+
     /// `/diagnostics` content for the node.
     pub fn diagnostics(&self) -> DiagnosticArray {
         let level = match self.state {
@@ -636,6 +703,31 @@ mod tests {
         );
         let o = n.on_image(CameraMsg::Raw(&s), Instant::now());
         assert_eq!(o.status.state, TrackStatus::STATE_LOST);
+    }
+
+    #[test]
+    fn debug_image_draws_the_box_in_the_camera_encoding() {
+        let seq = SynthParams::default();
+        let mut n = core();
+        assert!(n.debug_image().is_none());
+        let (m, t0) = image(&seq, 0);
+        n.on_image(CameraMsg::Raw(&m), Instant::now());
+        // Idle: the frame comes back unchanged.
+        assert_eq!(n.debug_image().unwrap().data, m.data);
+        n.on_reinit(&req(t0, Time::default()));
+        let d = n.debug_image().unwrap();
+        assert_eq!(
+            (d.width, d.height, d.encoding.as_str(), d.step),
+            (m.width, m.height, "rgb8", m.step)
+        );
+        let (x, y) = (t0.x.round() as usize, (t0.y + t0.h / 2.0).round() as usize);
+        let i = y * m.step as usize + x * 3;
+        assert_eq!(
+            &d.data[i..i + 3],
+            &[40, 220, 40],
+            "left edge of the box is green"
+        );
+        assert_eq!(d.header.stamp, m.header.stamp);
     }
 
     #[test]

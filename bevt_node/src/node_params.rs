@@ -6,7 +6,8 @@
 //!
 //! Parameters (see `config/node.yaml`): `domain_id`, `network_interfaces` (addresses;
 //! `[]` = all; default loopback only), `service_mapping` (`enhanced` | `cyclone`),
-//! `reinit_buffer_frames`, `stale_timeout_s`, `diagnostics_period_s`, `class_id`, and
+//! `reinit_buffer_frames`, `stale_timeout_s`, `diagnostics_period_s`,
+//! `debug_image_rate_hz` (0 = off), `class_id`, and
 //! every tracker key as `tracker.<section>.<key>` (as in `config/bevt.yaml`).
 //! Unknown or invalid parameters stop start-up with a message naming them.
 
@@ -266,6 +267,13 @@ pub fn launch_from_args(
                     return Err(param_err(k, "expected a positive number of seconds"));
                 }
                 ros_settings.diagnostics_period = Duration::from_secs_f64(s);
+            }
+            "debug_image_rate_hz" => {
+                let r = as_f64()?;
+                if !(r.is_finite() && (0.0..=100.0).contains(&r)) {
+                    return Err(param_err(k, "expected 0 (off) ..= 100 Hz"));
+                }
+                ros_settings.debug_image_rate_hz = r;
             }
             "class_id" => {
                 node.class_id = v

@@ -39,6 +39,8 @@ pub mod names {
     pub const TRACK_STATUS: &str = "track_status";
     /// Diagnostics out.
     pub const DIAGNOSTICS: &str = "/diagnostics";
+    /// Frames with the box drawn out (throttled, best effort; off unless configured).
+    pub const DEBUG_IMAGE: &str = "debug_image";
     /// Re-initialisation service.
     pub const REINIT: &str = "reinit";
     /// Stop service.
@@ -82,6 +84,8 @@ pub struct RosSettings {
     pub remaps: Vec<(String, String)>,
     /// Diagnostics period.
     pub diagnostics_period: Duration,
+    /// `debug_image` rate, Hz (0 = not published).
+    pub debug_image_rate_hz: f64,
 }
 
 impl Default for RosSettings {
@@ -94,6 +98,7 @@ impl Default for RosSettings {
             service_mapping: ServiceMapping::Enhanced,
             remaps: Vec::new(),
             diagnostics_period: Duration::from_secs(1),
+            debug_image_rate_hz: 0.0,
         }
     }
 }
@@ -233,6 +238,17 @@ pub fn run(
     let t_det = topic(&node, names::DETECTIONS, type_of::<Detection2DArray>(), &oq)?;
     let t_status = topic(&node, names::TRACK_STATUS, type_of::<TrackStatus>(), &oq)?;
     let t_diag = topic(&node, names::DIAGNOSTICS, type_of::<DiagnosticArray>(), &oq)?;
+    let pub_debug = if settings.debug_image_rate_hz > 0.0 {
+        let t = topic(&node, names::DEBUG_IMAGE, type_of::<Image>(), &cq)?;
+        Some(
+            node.create_publisher::<Image>(&t, Some(cq.clone()))
+                .map_err(create_err("debug image publisher"))?,
+        )
+    } else {
+        None
+    };
+    let debug_period = Duration::from_secs_f64(1.0 / settings.debug_image_rate_hz.max(1e-3));
+    let mut next_debug = Instant::now();
     let sub_img = node
         .create_subscription::<Image>(&t_img, Some(cq.clone()))
         .map_err(create_err("image subscription"))?;
@@ -388,6 +404,14 @@ pub fn run(
             None => {}
         }
         let now = Instant::now();
+        if let Some(p) = &pub_debug {
+            if now >= next_debug {
+                if let Some(img) = core.debug_image() {
+                    next_debug = now + debug_period;
+                    let _ = p.publish(img);
+                }
+            }
+        }
         if now >= next_diag {
             next_diag = now + settings.diagnostics_period;
             if let Some(s) = core.on_tick(now) {

@@ -239,3 +239,86 @@ impl GroundStation {
         out
     }
 }
+
+/// A hand-driven peer that publishes arbitrary camera messages and `init` boxes (for
+/// tests of bad input and of the topic interfaces).
+pub struct RawPeer {
+    _ctx: Context,
+    _node: Node,
+    image: ros2_client::Publisher<Image>,
+    compressed: ros2_client::Publisher<bevt_msgs::sensor_msgs::CompressedImage>,
+    init: ros2_client::Publisher<bevt_msgs::vision_msgs::Detection2D>,
+}
+
+impl RawPeer {
+    /// Connects to the node described by `settings`.
+    ///
+    /// # Errors
+    /// [`RosError`] when DDS entities cannot be created.
+    pub fn new(settings: &RosSettings) -> Result<Self, RosError> {
+        use bevt_msgs::sensor_msgs::CompressedImage;
+        let ctx = context(settings)?;
+        let mut n = node(&ctx, "bevt_sim_raw_peer")?;
+        let err = |what: &str| {
+            let what = what.to_string();
+            move |e: ros2_client::CreateError| RosError::Create {
+                what: what.clone(),
+                reason: format!("{e:?}"),
+            }
+        };
+        let cq = camera_qos();
+        let oq = output_qos();
+        let t = n
+            .create_topic(
+                &ros_name(settings, crate::ros::names::IMAGE)?,
+                MessageTypeName::new(Image::PACKAGE, Image::NAME),
+                &cq,
+            )
+            .map_err(err("image topic"))?;
+        let image = n
+            .create_publisher::<Image>(&t, Some(cq.clone()))
+            .map_err(err("image publisher"))?;
+        let t = n
+            .create_topic(
+                &ros_name(settings, crate::ros::names::IMAGE_COMPRESSED)?,
+                MessageTypeName::new(CompressedImage::PACKAGE, CompressedImage::NAME),
+                &cq,
+            )
+            .map_err(err("compressed topic"))?;
+        let compressed = n
+            .create_publisher::<CompressedImage>(&t, Some(cq.clone()))
+            .map_err(err("compressed publisher"))?;
+        let t = n
+            .create_topic(
+                &ros_name(settings, crate::ros::names::INIT)?,
+                MessageTypeName::new("vision_msgs", "Detection2D"),
+                &oq,
+            )
+            .map_err(err("init topic"))?;
+        let init = n
+            .create_publisher::<bevt_msgs::vision_msgs::Detection2D>(&t, Some(oq))
+            .map_err(err("init publisher"))?;
+        Ok(Self {
+            _ctx: ctx,
+            _node: n,
+            image,
+            compressed,
+            init,
+        })
+    }
+
+    /// Publishes an image (any content, valid or not).
+    pub fn image(&self, m: Image) {
+        let _ = self.image.publish(m);
+    }
+
+    /// Publishes a compressed image.
+    pub fn compressed(&self, m: bevt_msgs::sensor_msgs::CompressedImage) {
+        let _ = self.compressed.publish(m);
+    }
+
+    /// Publishes an initial box on the `init` topic.
+    pub fn init(&self, d: bevt_msgs::vision_msgs::Detection2D) {
+        let _ = self.init.publish(d);
+    }
+}

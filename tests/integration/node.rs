@@ -173,3 +173,169 @@ fn bad_reinit_requests_are_refused_and_the_node_keeps_running() {
     let (n, good) = collect(&r, Duration::from_secs(2), 5.0);
     assert!(n >= 10 && good * 10 >= n * 9, "{good}/{n}");
 }
+
+mod topics_and_bad_input {
+    use super::*;
+    use bevt_msgs::bevt::TrackStatus;
+    use bevt_msgs::sensor_msgs::{CompressedImage, Image};
+    use bevt_msgs::std_msgs::Header;
+    use bevt_msgs::vision_msgs::{BoundingBox2D, Detection2D, Point2D, Pose2D};
+    use bevt_node::sim::{wall_stamp, RawPeer};
+
+    fn image(seq: &SynthParams, t: usize) -> (Image, BBox) {
+        let f = seq.frame(t);
+        (
+            Image {
+                header: Header {
+                    stamp: wall_stamp(),
+                    frame_id: "cam".into(),
+                },
+                height: seq.height as u32,
+                width: seq.width as u32,
+                encoding: "rgb8".into(),
+                is_bigendian: 0,
+                step: (seq.width * 3) as u32,
+                data: f.rgb,
+            },
+            f.truth,
+        )
+    }
+
+    /// Statuses received within `timeout` until one satisfies `want`.
+    fn wait_status(
+        gs: &GroundStation,
+        timeout: Duration,
+        want: impl Fn(&TrackStatus) -> bool,
+    ) -> Option<TrackStatus> {
+        let end = Instant::now() + timeout;
+        while Instant::now() < end {
+            if let Some(s) = gs.take_status().into_iter().find(|s| want(s)) {
+                return Some(s);
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        None
+    }
+
+    #[test]
+    fn init_topic_compressed_input_and_bad_images_over_dds() {
+        let settings = RosSettings {
+            domain_id: domain(2),
+            ..RosSettings::default()
+        };
+        let stop = Arc::new(AtomicBool::new(false));
+        let core = NodeCore::new(
+            TrackerConfig::default().validate().unwrap(),
+            NodeSettings::default(),
+        );
+        let (s2, st2) = (settings.clone(), stop.clone());
+        let node = std::thread::spawn(move || run(core, &s2, st2, |_| {}).unwrap());
+        let peer = RawPeer::new(&settings).unwrap();
+        let gs = GroundStation::new(&settings).unwrap();
+        let seq = SynthParams::default();
+        // Keep sending frame 0 until the node reports it (first samples may be lost).
+        let (m0, t0) = image(&seq, 0);
+        let end = Instant::now() + Duration::from_secs(15);
+        loop {
+            peer.image(m0.clone());
+            if wait_status(&gs, Duration::from_millis(200), |s| {
+                s.header.stamp == m0.header.stamp
+            })
+            .is_some()
+            {
+                break;
+            }
+            assert!(Instant::now() < end, "the node never reported frame 0");
+        }
+        // Initialise through the init topic, on frame 0's stamp.
+        let c = t0.center();
+        let det = Detection2D {
+            header: m0.header.clone(),
+            bbox: BoundingBox2D {
+                center: Pose2D {
+                    position: Point2D {
+                        x: c.x as f64,
+                        y: c.y as f64,
+                    },
+                    theta: 0.0,
+                },
+                size_x: t0.w as f64,
+                size_y: t0.h as f64,
+            },
+            ..Detection2D::default()
+        };
+        let end = Instant::now() + Duration::from_secs(10);
+        while gs.take_detections().iter().all(|d| d.detections.is_empty()) {
+            peer.init(det.clone());
+            std::thread::sleep(Duration::from_millis(200));
+            assert!(
+                Instant::now() < end,
+                "the init topic did not start tracking"
+            );
+        }
+        // Compressed frames are tracked too.
+        let (m1, t1) = image(&seq, 1);
+        let mut png = Vec::new();
+        image::RgbImage::from_raw(m1.width, m1.height, m1.data.clone())
+            .unwrap()
+            .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
+        let cm = CompressedImage {
+            header: m1.header.clone(),
+            format: "png".into(),
+            data: png,
+        };
+        peer.compressed(cm.clone());
+        let s = wait_status(&gs, Duration::from_secs(5), |s| {
+            s.header.stamp == m1.header.stamp
+        })
+        .expect("status for the png frame");
+        assert_eq!(s.state, TrackStatus::STATE_TRACKING, "{}", s.reason);
+        let b = BBox::new(s.x, s.y, s.width, s.height);
+        assert!(b.center().distance(&t1.center()) < 5.0, "{b:?} vs {t1:?}");
+        // Bad inputs: each is reported with its reason; the node keeps running.
+        let mut short = image(&seq, 2).0;
+        short.data.truncate(100);
+        let mut odd = image(&seq, 2).0;
+        odd.encoding = "32FC1".into();
+        for (bad, why) in [(short, "data has 100 bytes"), (odd, "32FC1")] {
+            let stamp = bad.header.stamp;
+            peer.image(bad);
+            let s = wait_status(&gs, Duration::from_secs(5), |s| s.header.stamp == stamp)
+                .expect("status for a bad image");
+            assert_eq!(s.state, TrackStatus::STATE_ERROR);
+            assert!(s.reason.contains(why), "{}", s.reason);
+        }
+        let mut corrupt = cm;
+        corrupt.header.stamp = wall_stamp();
+        corrupt.data.truncate(40);
+        let stamp = corrupt.header.stamp;
+        peer.compressed(corrupt);
+        let s = wait_status(&gs, Duration::from_secs(5), |s| s.header.stamp == stamp)
+            .expect("status for a corrupt png");
+        assert_eq!(s.state, TrackStatus::STATE_ERROR);
+        // Still tracking on the next good frame; then a resolution change resets it.
+        let (m3, _) = image(&seq, 3);
+        peer.image(m3.clone());
+        let s = wait_status(&gs, Duration::from_secs(5), |s| {
+            s.header.stamp == m3.header.stamp
+        })
+        .expect("status");
+        assert_eq!(s.state, TrackStatus::STATE_TRACKING, "{}", s.reason);
+        let small = SynthParams {
+            width: 160,
+            height: 120,
+            ..SynthParams::default()
+        };
+        let (m4, _) = image(&small, 4);
+        peer.image(m4.clone());
+        let s = wait_status(&gs, Duration::from_secs(5), |s| {
+            s.header.stamp == m4.header.stamp
+        })
+        .expect("status");
+        assert_eq!(s.state, TrackStatus::STATE_LOST);
+        assert!(s.reason.contains("re-initialise"), "{}", s.reason);
+        stop.store(true, Ordering::Relaxed);
+        let _ = node.join();
+    }
+}
