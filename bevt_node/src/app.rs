@@ -561,14 +561,7 @@ mod tests {
     }
 
     fn req(b: BBox, stamp: Time) -> ReinitRequest {
-        ReinitRequest {
-            x: b.x as f64,
-            y: b.y as f64,
-            width: b.w as f64,
-            height: b.h as f64,
-            stamp,
-            frame_id: String::new(),
-        }
+        crate::convert::reinit_request(b, stamp, "")
     }
 
     #[test]

@@ -216,6 +216,22 @@ pub fn detections_from_output(
     }
 }
 
+/// A `bevt_msgs/Reinit` request for box `b` drawn on the frame stamped `stamp`.
+pub fn reinit_request(
+    b: BBox,
+    stamp: bevt_msgs::builtin_interfaces::Time,
+    frame_id: &str,
+) -> bevt_msgs::bevt::ReinitRequest {
+    bevt_msgs::bevt::ReinitRequest {
+        x: b.x as f64,
+        y: b.y as f64,
+        width: b.w as f64,
+        height: b.h as f64,
+        stamp,
+        frame_id: frame_id.to_string(),
+    }
+}
+
 /// The box of a detection (inverse of [`detections_from_output`]).
 pub fn bbox_from_detection(d: &Detection2D) -> BBox {
     let b = &d.bbox;

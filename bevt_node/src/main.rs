@@ -6,10 +6,10 @@
 
 use anyhow::{Context as _, Result};
 use bevt_core::eval::synth::SynthParams;
-use bevt_msgs::bevt::ReinitRequest;
 use bevt_msgs::builtin_interfaces::Time;
 use bevt_node::app::NodeCore;
 use bevt_node::convert::bbox_from_detection;
+use bevt_node::convert::reinit_request;
 use bevt_node::node_params::{launch_from_args, Launch};
 use bevt_node::ros;
 use bevt_node::sim::{spawn_camera, GroundStation};
@@ -60,14 +60,7 @@ fn demo(launch: Launch, stop: Arc<AtomicBool>) -> Result<()> {
             .map(|(k, v)| (*k, *v))
             .context("the camera published nothing")?
     };
-    let req = ReinitRequest {
-        x: b.x as f64,
-        y: b.y as f64,
-        width: b.w as f64,
-        height: b.h as f64,
-        stamp: Time::from_nanos(stamp),
-        frame_id: String::new(),
-    };
+    let req = reinit_request(b, Time::from_nanos(stamp), "");
     match gs.reinit(&req, Duration::from_secs(5)) {
         Some(r) => println!(
             "ground station: reinit -> success={} ({})",

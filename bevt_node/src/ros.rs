@@ -336,22 +336,29 @@ pub fn run(
     };
     let mut next_diag = Instant::now();
     while !shutdown.load(Ordering::Relaxed) {
-        while let Ok(Some((id, req))) = srv_reinit.receive_request() {
-            let (resp, out) = core.on_reinit(&req);
-            log(
-                &node,
-                if resp.success {
-                    ros2_client::log::LogLevel::Info
-                } else {
-                    ros2_client::log::LogLevel::Warn
-                },
-                &format!("reinit: {}", resp.message),
-            );
+        // Requests from the service and the init topic take the same path.
+        let mut reinit = |req: &ReinitRequest, source: &str, core: &mut NodeCore| {
+            let (resp, out) = core.on_reinit(req);
+            let level = if resp.success {
+                ros2_client::log::LogLevel::Info
+            } else {
+                ros2_client::log::LogLevel::Warn
+            };
+            log(&node, level, &format!("{source}: {}", resp.message));
             if let Some(o) = out {
                 publish(&o);
                 observe(&o);
             }
+            resp
+        };
+        while let Ok(Some((id, req))) = srv_reinit.receive_request() {
+            let resp = reinit(&req, "reinit", &mut core);
             let _ = srv_reinit.send_response(id, resp);
+        }
+        while let Ok(Some((det, _))) = sub_init.take() {
+            let b = crate::convert::bbox_from_detection(&det);
+            let req = crate::convert::reinit_request(b, det.header.stamp, &det.header.frame_id);
+            reinit(&req, "init topic", &mut core);
         }
         while let Ok(Some((id, _))) = srv_stop.receive_request() {
             let resp = core.on_stop();
@@ -361,31 +368,6 @@ pub fn run(
                 &format!("stop: {}", resp.message),
             );
             let _ = srv_stop.send_response(id, resp);
-        }
-        while let Ok(Some((det, _))) = sub_init.take() {
-            let b = crate::convert::bbox_from_detection(&det);
-            let req = ReinitRequest {
-                x: b.x as f64,
-                y: b.y as f64,
-                width: b.w as f64,
-                height: b.h as f64,
-                stamp: det.header.stamp,
-                frame_id: det.header.frame_id.clone(),
-            };
-            let (resp, out) = core.on_reinit(&req);
-            log(
-                &node,
-                if resp.success {
-                    ros2_client::log::LogLevel::Info
-                } else {
-                    ros2_client::log::LogLevel::Warn
-                },
-                &format!("init topic: {}", resp.message),
-            );
-            if let Some(o) = out {
-                publish(&o);
-                observe(&o);
-            }
         }
         match slot.take(WORKER_WAIT) {
             Some(Incoming::Raw(m, t)) => {

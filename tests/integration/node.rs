@@ -93,14 +93,7 @@ fn delayed_truth(r: &Running, age: Duration) -> (i64, BBox) {
 }
 
 fn request(b: BBox, stamp: i64) -> ReinitRequest {
-    ReinitRequest {
-        x: b.x as f64,
-        y: b.y as f64,
-        width: b.w as f64,
-        height: b.h as f64,
-        stamp: Time::from_nanos(stamp),
-        frame_id: String::new(),
-    }
+    bevt_node::convert::reinit_request(b, Time::from_nanos(stamp), "")
 }
 
 /// Collects detections for `dur`; returns (count, count within `tol` px of the truth).

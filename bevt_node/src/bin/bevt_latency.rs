@@ -8,9 +8,9 @@
 use anyhow::{Context as _, Result};
 use bevt_core::eval::synth::SynthParams;
 use bevt_core::TrackerConfig;
-use bevt_msgs::bevt::ReinitRequest;
 use bevt_msgs::builtin_interfaces::Time;
 use bevt_node::app::{NodeCore, NodeSettings};
+use bevt_node::convert::reinit_request;
 use bevt_node::ros::{run, RosSettings};
 use bevt_node::sim::{spawn_camera, wall_stamp, GroundStation};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -73,14 +73,7 @@ fn main() -> Result<()> {
             .map(|(k, v)| (*k, *v))
             .context("no frame published")?
     };
-    let req = ReinitRequest {
-        x: b.x as f64,
-        y: b.y as f64,
-        width: b.w as f64,
-        height: b.h as f64,
-        stamp: Time::from_nanos(stamp),
-        frame_id: String::new(),
-    };
+    let req = reinit_request(b, Time::from_nanos(stamp), "");
     let r = gs
         .reinit(&req, Duration::from_secs(10))
         .context("reinit not answered")?;
