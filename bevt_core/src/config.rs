@@ -247,6 +247,25 @@ fn check(
     }
 }
 
+/// Largest `window.search_area_scale` (ref 5).
+const MAX_SEARCH_AREA_SCALE: f32 = 10.0;
+/// Largest `window.padding` (ref 1.2).
+const MAX_PADDING: f32 = 3.0;
+/// Largest feature grid side, cells (ref 60).
+const MAX_GRID_SIDE: usize = 256;
+/// Largest patch side, pixels (ref 240).
+const MAX_PATCH_SIDE: usize = 1024;
+/// Most patch pixels sampled per frame over all scales (ref 5 · 240²).
+const MAX_PATCH_PIXELS: usize = 8 << 20;
+/// Largest `admm.mu_init`, `admm.lambda` and penalty-window value.
+const MAX_ADMM_VALUE: f32 = 1e6;
+/// Largest `admm.mu_max` (ref 1e4).
+const MAX_ADMM_MU: f32 = 1e9;
+/// Largest `admm.beta` (ref 20).
+const MAX_ADMM_BETA: f32 = 1000.0;
+/// Most Newton iterations of the sub-cell peak (ref 50).
+const MAX_NEWTON_ITERATIONS: usize = 100;
+
 fn finite_pos(v: f32) -> bool {
     v.is_finite() && v > 0.0
 }
@@ -271,17 +290,18 @@ impl TrackerConfig {
             "(0, 1e4]",
         )?;
         let w = &self.window;
+        // Work per frame grows with search_area_scale² (frame pixels read per scale).
         check(
-            finite_pos(w.search_area_scale) && w.search_area_scale >= 1.0,
+            (1.0..=MAX_SEARCH_AREA_SCALE).contains(&w.search_area_scale),
             "window.search_area_scale",
             w.search_area_scale,
-            ">= 1",
+            "1..=10",
         )?;
         check(
-            finite_pos(w.padding) && w.padding >= 1.0,
+            (1.0..=MAX_PADDING).contains(&w.padding),
             "window.padding",
             w.padding,
-            ">= 1",
+            "1..=3",
         )?;
         check(
             finite_pos(w.filter_max_area)
@@ -298,10 +318,43 @@ impl TrackerConfig {
             "(0, 1]",
         )?;
         check(
-            finite_pos(w.output_sigma_factor),
+            finite_pos(w.output_sigma_factor) && w.output_sigma_factor <= 1.0,
             "window.output_sigma_factor",
             w.output_sigma_factor,
-            "> 0",
+            "(0, 1]",
+        )?;
+        // Memory and work of one frame: the feature grid is at most
+        // round(sqrt(filter_max_area) · padding) cells a side, the patch that many cells of
+        // hog_cell_size pixels, and one patch is sampled per scale.
+        let grid_side = (w.filter_max_area.sqrt() * w.padding).round() + 1.0;
+        check(
+            grid_side <= MAX_GRID_SIDE as f32,
+            "window.filter_max_area",
+            format!(
+                "{} (grid side sqrt(filter_max_area) · padding = {grid_side} cells)",
+                w.filter_max_area
+            ),
+            "sqrt(window.filter_max_area) · window.padding <= 256 cells",
+        )?;
+        let patch_side = grid_side * f.hog_cell_size as f32;
+        check(
+            patch_side <= MAX_PATCH_SIDE as f32,
+            "features.hog_cell_size",
+            format!(
+                "{} (patch side grid side · hog_cell_size = {patch_side} px)",
+                f.hog_cell_size
+            ),
+            "grid side (sqrt(window.filter_max_area) · window.padding) · features.hog_cell_size <= 1024 px",
+        )?;
+        let patch_pixels = patch_side * patch_side * self.detection.number_of_scales as f32;
+        check(
+            patch_pixels <= MAX_PATCH_PIXELS as f32,
+            "detection.number_of_scales",
+            format!(
+                "{} ({patch_pixels} patch pixels per frame)",
+                self.detection.number_of_scales
+            ),
+            "number_of_scales · patch side² <= 8 M pixels per frame",
         )?;
         let a = &self.admm;
         check(
@@ -310,36 +363,41 @@ impl TrackerConfig {
             a.iterations,
             "1..=100",
         )?;
-        check(finite_pos(a.mu_init), "admm.mu_init", a.mu_init, "> 0")?;
         check(
-            a.beta.is_finite() && a.beta >= 1.0,
+            finite_pos(a.mu_init) && a.mu_init <= MAX_ADMM_VALUE,
+            "admm.mu_init",
+            a.mu_init,
+            "(0, 1e6]",
+        )?;
+        check(
+            (1.0..=MAX_ADMM_BETA).contains(&a.beta),
             "admm.beta",
             a.beta,
-            ">= 1",
+            "1..=1000",
         )?;
         check(
-            finite_pos(a.mu_max) && a.mu_max >= a.mu_init,
+            finite_pos(a.mu_max) && a.mu_max >= a.mu_init && a.mu_max <= MAX_ADMM_MU,
             "admm.mu_max",
             a.mu_max,
-            ">= admm.mu_init",
+            "admm.mu_init..=1e9",
         )?;
         check(
-            a.lambda.is_finite() && a.lambda >= 0.0,
+            (0.0..=MAX_ADMM_VALUE).contains(&a.lambda),
             "admm.lambda",
             a.lambda,
-            ">= 0",
+            "0..=1e6",
         )?;
         check(
-            a.reg_window_min.is_finite() && a.reg_window_min >= 0.0,
+            (0.0..=MAX_ADMM_VALUE).contains(&a.reg_window_min),
             "admm.reg_window_min",
             a.reg_window_min,
-            ">= 0",
+            "0..=1e6",
         )?;
         check(
-            a.reg_window_edge.is_finite() && a.reg_window_edge >= a.reg_window_min,
+            a.reg_window_edge >= a.reg_window_min && a.reg_window_edge <= MAX_ADMM_VALUE,
             "admm.reg_window_edge",
             a.reg_window_edge,
-            ">= admm.reg_window_min",
+            "admm.reg_window_min..=1e6",
         )?;
         let d = &self.detection;
         check(
@@ -354,11 +412,18 @@ impl TrackerConfig {
             d.scale_step,
             "(1, 2)",
         )?;
+        // Each Newton iteration evaluates the response spectrum once (O(grid cells)).
         check(
-            d.newton_iterations <= 1000,
+            d.newton_iterations <= MAX_NEWTON_ITERATIONS,
             "detection.newton_iterations",
             d.newton_iterations,
-            "0..=1000",
+            "0..=100",
+        )?;
+        check(
+            d.scale_penalty.is_finite() && d.scale_penalty > 0.0 && d.scale_penalty <= 1.0,
+            "detection.scale_penalty",
+            d.scale_penalty,
+            "(0, 1]",
         )?;
         let l = &self.learning;
         check(
@@ -448,6 +513,81 @@ mod tests {
         let mut c = TrackerConfig::default();
         c.verification.threshold_high = 0.1;
         assert!(matches!(c.validate(), Err(ConfigError::Inconsistent(_))));
+    }
+
+    #[test]
+    fn values_implying_unbounded_work_or_memory_are_refused_by_name() {
+        type Set = fn(&mut TrackerConfig, f32);
+        let cases: [(&str, Set); 9] = [
+            ("window.padding", |c, v| c.window.padding = v),
+            ("window.search_area_scale", |c, v| {
+                c.window.search_area_scale = v
+            }),
+            ("window.filter_max_area", |c, v| {
+                c.window.filter_max_area = v
+            }),
+            ("window.output_sigma_factor", |c, v| {
+                c.window.output_sigma_factor = v
+            }),
+            ("admm.mu_init", |c, v| c.admm.mu_init = v),
+            ("admm.beta", |c, v| c.admm.beta = v),
+            ("admm.lambda", |c, v| c.admm.lambda = v),
+            ("detection.scale_penalty", |c, v| {
+                c.detection.scale_penalty = v
+            }),
+            ("features.gain", |c, v| c.features.gain = v),
+        ];
+        for (name, set) in cases {
+            for v in [1e30, 1e20, 1e7, f32::NAN, f32::INFINITY, -1.0, -1e-30] {
+                let mut c = TrackerConfig::default();
+                set(&mut c, v);
+                let e = c.validate().map(|_| ()).unwrap_err().to_string();
+                assert!(e.contains(name), "{name} = {v}: {e}");
+            }
+        }
+        for (v, set) in [
+            (1000.0, (|c, v| c.window.padding = v) as Set),
+            (1000.0, |c, v| c.window.search_area_scale = v),
+            (65536.0, |c, v| c.window.search_area_scale = v),
+        ] {
+            let mut c = TrackerConfig::default();
+            set(&mut c, v);
+            assert!(c.validate().is_err(), "{v}");
+        }
+        // Combinations: the grid, the patch and the per-frame patch pixels are bounded.
+        let mut c = TrackerConfig::default();
+        c.window.filter_max_area = 65536.0;
+        c.window.padding = 3.0;
+        assert!(c
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("filter_max_area"));
+        let mut c = TrackerConfig::default();
+        c.window.filter_max_area = 10000.0;
+        c.features.hog_cell_size = 16;
+        assert!(c
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("hog_cell_size"));
+        let mut c = TrackerConfig::default();
+        c.window.filter_max_area = 16384.0;
+        c.detection.number_of_scales = 33;
+        assert!(c
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("number_of_scales"));
+        let mut c = TrackerConfig::default();
+        c.detection.newton_iterations = 101;
+        assert!(c.validate().is_err());
+        // The largest accepted values still validate.
+        let mut c = TrackerConfig::default();
+        c.window.search_area_scale = 10.0;
+        c.window.padding = 3.0;
+        c.detection.newton_iterations = 100;
+        c.validate().unwrap();
     }
 
     #[test]

@@ -7,9 +7,17 @@
 //! *that* frame; the newer buffered frames are then tracked through (fast-forward) so the
 //! published track is current. A bad request is answered `success = false` with the
 //! reason, and the current track is kept.
+//!
+//! Bounds (all from [`NodeSettings`]): a camera frame over [`ImageLimits`] is an error
+//! that is neither decoded nor buffered and leaves the track as it is; the ring buffer
+//! holds at most `reinit_buffer_frames` frames and `reinit_buffer_bytes` bytes and gives
+//! memory back after large frames; a request fast-forwards through at most
+//! `reinit_max_fast_forward` frames; requests are admitted by a token bucket
+//! ([`ReinitGate`]: `reinit_rate_hz`, `reinit_burst`), and the ROS layer serves at most one
+//! admitted request per camera frame, answering the others at once with the reason.
 
 use crate::convert::{
-    detections_from_output, frame_from_compressed, frame_from_image, PixelBuffer,
+    clip, detections_from_output, frame_from_compressed, frame_from_image, ImageLimits, PixelBuffer,
 };
 use bevt_core::{BBox, BevtTracker, Frame, PixelFormat, TrackOutput, Tracker, TrackerSpec};
 use bevt_msgs::bevt::{ReinitRequest, ReinitResponse, TrackStatus};
@@ -24,14 +32,30 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 /// Line thickness of the debug image's box, pixels.
 const DEBUG_LINE_PX: i64 = 2;
+/// A recycled ring-buffer slot is reused when its capacity exceeds the frame by at most
+/// 1/`SLOT_SLACK`; otherwise it is freed and an exact one allocated.
+const SLOT_SLACK: usize = 4;
 
-/// Settings of the node logic.
+/// Settings of the node logic. Ranges are checked where they are loaded
+/// ([`crate::node_params`]); values outside them are clamped here so nothing panics.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NodeSettings {
     /// `class_id` of published hypotheses.
     pub class_id: String,
     /// Recent frames kept for delayed re-initialisation.
     pub reinit_buffer_frames: usize,
+    /// Most bytes of pixels the re-initialisation buffer holds (older frames are dropped
+    /// first).
+    pub reinit_buffer_bytes: usize,
+    /// Most buffered frames one request tracks through to reach the newest frame; older
+    /// requests track through an evenly spaced subset of them.
+    pub reinit_max_fast_forward: usize,
+    /// Re-initialisation requests admitted per second (steady rate).
+    pub reinit_rate_hz: f64,
+    /// Requests admitted at once after a quiet period (token-bucket depth).
+    pub reinit_burst: u32,
+    /// Largest camera frame accepted.
+    pub image_limits: ImageLimits,
     /// No image for this long while tracking: the status says the camera is stale.
     pub stale_timeout: Duration,
     /// Name used in diagnostics.
@@ -43,8 +67,66 @@ impl Default for NodeSettings {
         Self {
             class_id: "target".into(),
             reinit_buffer_frames: 30,
+            reinit_buffer_bytes: 256 << 20,
+            reinit_max_fast_forward: 10,
+            reinit_rate_hz: 2.0,
+            reinit_burst: 5,
+            image_limits: ImageLimits::default(),
             stale_timeout: Duration::from_secs(2),
             node_name: "bevt_node".into(),
+        }
+    }
+}
+
+/// Admission of re-initialisation requests: a token bucket of `burst` tokens refilled at
+/// `rate_hz`. Each request takes a token or is refused with the reason.
+#[derive(Debug, Clone)]
+pub struct ReinitGate {
+    rate_hz: f64,
+    burst: f64,
+    tokens: f64,
+    last: Option<Instant>,
+}
+
+impl ReinitGate {
+    /// A full bucket.
+    pub fn new(rate_hz: f64, burst: u32) -> Self {
+        let burst = f64::from(burst.max(1));
+        Self {
+            rate_hz: if rate_hz.is_finite() {
+                rate_hz.max(0.0)
+            } else {
+                0.0
+            },
+            burst,
+            tokens: burst,
+            last: None,
+        }
+    }
+
+    /// Takes a token at `now`.
+    ///
+    /// # Errors
+    /// The refusal message (rate limit and when the next token is due).
+    pub fn admit(&mut self, now: Instant) -> Result<(), String> {
+        if let Some(last) = self.last {
+            let dt = now.saturating_duration_since(last).as_secs_f64();
+            self.tokens = (self.tokens + dt * self.rate_hz).min(self.burst);
+        }
+        self.last = Some(now);
+        if self.tokens >= 1.0 {
+            self.tokens -= 1.0;
+            Ok(())
+        } else {
+            let wait = if self.rate_hz > 0.0 {
+                (1.0 - self.tokens) / self.rate_hz
+            } else {
+                f64::INFINITY
+            };
+            Err(format!(
+                "refused: rate limit of {} requests/s (burst {}) exceeded, next accepted in {wait:.2} s; current track kept",
+                self.rate_hz, self.burst
+            ))
         }
     }
 }
@@ -76,7 +158,7 @@ pub struct FrameOutputs {
     pub status: TrackStatus,
 }
 
-/// An owned copy of a frame for the ring buffer.
+/// An owned, packed copy of a frame for the ring buffer.
 #[derive(Debug, Clone)]
 struct Buffered {
     header: Header,
@@ -88,6 +170,35 @@ struct Buffered {
 }
 
 impl Buffered {
+    /// Packed copy of `frame` into `slot` (a recycled buffer), which is replaced when it
+    /// would keep much more capacity than this frame needs.
+    fn copy(header: Header, frame: &Frame<'_>, slot: Option<Vec<u8>>) -> Self {
+        let (w, h) = (frame.width(), frame.height());
+        let row = w * frame.format().bytes_per_pixel();
+        let need = row * h;
+        let mut data = slot
+            .filter(|d| d.capacity() >= need && d.capacity() <= need + need / SLOT_SLACK)
+            .unwrap_or_else(|| Vec::with_capacity(need));
+        data.clear();
+        let (src, stride) = (frame.data(), frame.stride());
+        for r in 0..h {
+            data.extend_from_slice(&src[r * stride..r * stride + row]);
+        }
+        Self {
+            header,
+            width: w,
+            height: h,
+            stride: row,
+            format: frame.format(),
+            data,
+        }
+    }
+
+    /// Bytes held.
+    fn bytes(&self) -> usize {
+        self.data.capacity()
+    }
+
     fn frame(&self) -> Option<Frame<'_>> {
         Frame::new(
             &self.data,
@@ -106,6 +217,8 @@ pub struct NodeCore {
     settings: NodeSettings,
     tracker: BevtTracker,
     buffer: VecDeque<Buffered>,
+    buffer_bytes: usize,
+    gate: ReinitGate,
     pixels: PixelBuffer,
     track_id: u32,
     frames_processed: u32,
@@ -134,14 +247,27 @@ fn now_stamp() -> Time {
     Time::from_nanos(d.as_nanos().min(i64::MAX as u128) as i64)
 }
 
+/// Offsets (1-based, past the request's frame) of the buffered frames a request tracks
+/// through: all `newer` when they are at most `max`, else `max` evenly spaced ones ending
+/// with the newest.
+fn fast_forward_steps(newer: usize, max: usize) -> Vec<usize> {
+    if newer <= max {
+        (1..=newer).collect()
+    } else {
+        (1..=max).map(|k| (k * newer).div_ceil(max)).collect()
+    }
+}
+
 impl NodeCore {
     /// A node with no target.
     pub fn new(spec: TrackerSpec, settings: NodeSettings) -> Self {
         Self {
             tracker: BevtTracker::new(spec.clone()),
             spec,
+            gate: ReinitGate::new(settings.reinit_rate_hz, settings.reinit_burst),
             settings,
             buffer: VecDeque::new(),
+            buffer_bytes: 0,
             pixels: PixelBuffer::default(),
             track_id: 0,
             frames_processed: 0,
@@ -170,35 +296,39 @@ impl NodeCore {
         let header = msg.header().clone();
         self.last_header = header.clone();
         // Convert (zero-copy where possible) and keep an owned copy for the ring buffer.
+        let limits = self.settings.image_limits;
         let conv = match msg {
-            CameraMsg::Raw(m) => frame_from_image(m, &mut self.pixels),
-            CameraMsg::Compressed(m) => frame_from_compressed(m, &mut self.pixels),
+            CameraMsg::Raw(m) => frame_from_image(m, &mut self.pixels, &limits),
+            CameraMsg::Compressed(m) => frame_from_compressed(m, &mut self.pixels, &limits),
         };
         let frame = match conv {
             Ok(f) => f,
             Err(e) => {
-                // The frame is unusable; the track (if any) is kept for the next one.
+                // The frame is unusable (over a limit, truncated, malformed): it is not
+                // buffered and the track (if any) is kept for the next one.
                 self.state = TrackStatus::STATE_ERROR;
                 self.reason = e.to_string();
                 return self.outputs(&header, None, received);
             }
         };
-        let slot = if self.buffer.len() >= self.settings.reinit_buffer_frames.max(1) {
-            self.buffer.pop_front()
-        } else {
-            None
-        };
-        let mut data = slot.map(|b| b.data).unwrap_or_default();
-        data.clear();
-        data.extend_from_slice(frame.data());
-        self.buffer.push_back(Buffered {
-            header: header.clone(),
-            width: frame.width(),
-            height: frame.height(),
-            stride: frame.stride(),
-            format: frame.format(),
-            data,
-        });
+        // Make room within the frame count and the byte budget, oldest first; recycle
+        // the last slot dropped.
+        let need = frame.width() * frame.height() * frame.format().bytes_per_pixel();
+        let mut slot = None;
+        while !self.buffer.is_empty()
+            && (self.buffer.len() >= self.settings.reinit_buffer_frames.max(1)
+                || self.buffer_bytes + need > self.settings.reinit_buffer_bytes)
+        {
+            if let Some(old) = self.buffer.pop_front() {
+                self.buffer_bytes -= old.bytes();
+                slot = Some(old.data);
+            }
+        }
+        if need <= self.settings.reinit_buffer_bytes {
+            let b = Buffered::copy(header.clone(), &frame, slot);
+            self.buffer_bytes += b.bytes();
+            self.buffer.push_back(b);
+        }
         self.frames_processed = self.frames_processed.saturating_add(1);
         let out = if self.tracker.is_initialized() {
             let r = self.tracker.update(&frame);
@@ -290,6 +420,18 @@ impl NodeCore {
         }
     }
 
+    /// Admission of a re-initialisation request arriving at `now` (token bucket, see
+    /// [`ReinitGate`]). A refused request must be answered with the returned response.
+    ///
+    /// # Errors
+    /// The refusal (`success = false` with the reason).
+    pub fn admit_reinit(&mut self, now: Instant) -> Result<(), ReinitResponse> {
+        self.gate.admit(now).map_err(|message| ReinitResponse {
+            success: false,
+            message,
+        })
+    }
+
     /// Handles a re-initialisation request; on success also returns the outputs for the
     /// newest buffered frame (after fast-forwarding).
     pub fn on_reinit(&mut self, req: &ReinitRequest) -> (ReinitResponse, Option<FrameOutputs>) {
@@ -320,7 +462,8 @@ impl NodeCore {
         if !req.frame_id.is_empty() && req.frame_id != newest.header.frame_id {
             return fail(format!(
                 "frame_id {:?} does not match the camera's {:?}; current track kept",
-                req.frame_id, newest.header.frame_id
+                clip(&req.frame_id),
+                clip(&newest.header.frame_id)
             ));
         }
         let index = if req.stamp.is_zero() {
@@ -352,14 +495,22 @@ impl NodeCore {
             return fail(format!("{e}; current track kept"));
         }
         let mut last = None;
-        for f in self.buffer.iter().skip(index + 1) {
-            let Some(frame) = f.frame() else { continue };
+        let newer = self.buffer.len() - 1 - index;
+        let steps = fast_forward_steps(newer, self.settings.reinit_max_fast_forward);
+        for k in &steps {
+            let Some(frame) = self.buffer[index + k].frame() else {
+                continue;
+            };
             match fresh.update(&frame) {
                 Ok(o) => last = Some(o),
                 Err(e) => return fail(format!("fast-forward failed: {e}; current track kept")),
             }
         }
-        let forwarded = self.buffer.len() - 1 - index;
+        let forwarded = if steps.len() == newer {
+            format!("{newer}")
+        } else {
+            format!("{} of the {newer}", steps.len())
+        };
         self.tracker = fresh;
         self.track_id = self.track_id.wrapping_add(1);
         let out = last.unwrap_or(TrackOutput {
@@ -498,7 +649,7 @@ impl NodeCore {
         DiagnosticArray {
             header: Header {
                 stamp: now_stamp(),
-                frame_id: self.last_header.frame_id.clone(),
+                frame_id: clip(&self.last_header.frame_id),
             },
             status: vec![DiagnosticStatus {
                 level,
@@ -508,7 +659,7 @@ impl NodeCore {
                 } else {
                     self.reason.clone()
                 },
-                hardware_id: self.last_header.frame_id.clone(),
+                hardware_id: clip(&self.last_header.frame_id),
                 values: vec![
                     kv("state", self.state.to_string()),
                     kv("track_id", self.track_id.to_string()),
@@ -519,6 +670,7 @@ impl NodeCore {
                         o.map_or("-".into(), |o| format!("{:.3}", o.consensus)),
                     ),
                     kv("buffered_frames", self.buffer.len().to_string()),
+                    kv("buffered_bytes", self.buffer_bytes.to_string()),
                 ],
             }],
         }
@@ -721,6 +873,206 @@ mod tests {
             "left edge of the box is green"
         );
         assert_eq!(d.header.stamp, m.header.stamp);
+    }
+
+    fn compressed_jpeg_declaring(w: u16, h: u16, stamp: Time) -> CompressedImage {
+        let mut jpg = Vec::new();
+        image::RgbImage::from_pixel(16, 16, image::Rgb([9, 9, 9]))
+            .write_to(
+                &mut std::io::Cursor::new(&mut jpg),
+                image::ImageFormat::Jpeg,
+            )
+            .unwrap();
+        let sof = jpg.windows(2).position(|p| p == [0xFF, 0xC0]).unwrap();
+        jpg[sof + 5..sof + 7].copy_from_slice(&h.to_be_bytes());
+        jpg[sof + 7..sof + 9].copy_from_slice(&w.to_be_bytes());
+        CompressedImage {
+            header: Header {
+                stamp,
+                frame_id: "cam".into(),
+            },
+            format: "jpeg".into(),
+            data: jpg,
+        }
+    }
+
+    #[test]
+    fn oversized_frames_are_errors_that_keep_the_track_and_are_not_buffered() {
+        let seq = SynthParams::default();
+        let mut n = core();
+        let (m, t0) = image(&seq, 0);
+        n.on_image(CameraMsg::Raw(&m), Instant::now());
+        assert!(n.on_reinit(&req(t0, Time::default())).0.success);
+        let id = n.track_id;
+        let (buffered, bytes) = (n.buffer.len(), n.buffer_bytes);
+        let bomb = compressed_jpeg_declaring(16000, 16000, Time { sec: 7, nanosec: 0 });
+        let raw_bomb = Image {
+            width: 5000,
+            height: 1,
+            step: 5000,
+            encoding: "mono8".into(),
+            data: vec![0; 5000],
+            ..m.clone()
+        };
+        for o in [
+            n.on_image(CameraMsg::Compressed(&bomb), Instant::now()),
+            n.on_image(CameraMsg::Raw(&raw_bomb), Instant::now()),
+        ] {
+            assert_eq!(o.status.state, TrackStatus::STATE_ERROR);
+            assert!(
+                o.status.reason.contains("max_image_width"),
+                "{}",
+                o.status.reason
+            );
+            assert_eq!((n.buffer.len(), n.buffer_bytes), (buffered, bytes));
+            assert_eq!(n.track_id, id);
+            assert!(n.tracker.is_initialized(), "the track was reset");
+        }
+        let (m1, truth) = image(&seq, 1);
+        let o = n.on_image(CameraMsg::Raw(&m1), Instant::now());
+        assert_eq!(
+            o.status.state,
+            TrackStatus::STATE_TRACKING,
+            "{}",
+            o.status.reason
+        );
+        let b = crate::convert::bbox_from_detection(&o.detections.detections[0]);
+        assert!(b.center().distance(&truth.center()) < 3.0);
+    }
+
+    #[test]
+    fn the_ring_buffer_keeps_its_byte_budget_and_gives_memory_back() {
+        let big = SynthParams {
+            width: 640,
+            height: 480,
+            ..SynthParams::default()
+        };
+        let small = SynthParams {
+            width: 160,
+            height: 120,
+            ..SynthParams::default()
+        };
+        let frame_bytes = |p: &SynthParams| p.width * p.height * 3;
+        let budget = 3 * frame_bytes(&big) + frame_bytes(&big) / 2;
+        let mut n = NodeCore::new(
+            TrackerConfig::default().validate().unwrap(),
+            NodeSettings {
+                reinit_buffer_bytes: budget,
+                ..NodeSettings::default()
+            },
+        );
+        for t in 0..6 {
+            let (m, _) = image(&big, t);
+            n.on_image(CameraMsg::Raw(&m), Instant::now());
+            assert!(n.buffer_bytes <= budget);
+        }
+        assert_eq!(n.buffer.len(), 3, "the budget holds 3 big frames");
+        // Small frames replace the big ones and no slot keeps a big capacity.
+        for t in 0..30 {
+            let (m, _) = image(&small, t);
+            n.on_image(CameraMsg::Raw(&m), Instant::now());
+        }
+        assert_eq!(n.buffer.len(), 30);
+        let per_slot = frame_bytes(&small) + frame_bytes(&small) / SLOT_SLACK;
+        assert!(n.buffer.iter().all(|b| b.bytes() <= per_slot));
+        assert_eq!(
+            n.buffer_bytes,
+            n.buffer.iter().map(|b| b.bytes()).sum::<usize>()
+        );
+        // A padded raw frame (step > width × 3) is buffered packed.
+        let (mut m, _) = image(&small, 31);
+        let row = small.width * 3;
+        let step = row + 64;
+        let mut padded = vec![0u8; step * small.height];
+        for r in 0..small.height {
+            padded[r * step..r * step + row].copy_from_slice(&m.data[r * row..(r + 1) * row]);
+        }
+        m.step = step as u32;
+        m.data = padded;
+        n.on_image(CameraMsg::Raw(&m), Instant::now());
+        assert_eq!(n.buffer.back().unwrap().data.len(), frame_bytes(&small));
+    }
+
+    #[test]
+    fn fast_forward_is_bounded_and_still_lands_on_the_target() {
+        assert_eq!(fast_forward_steps(3, 10), vec![1, 2, 3]);
+        assert_eq!(fast_forward_steps(25, 10).len(), 10);
+        assert_eq!(fast_forward_steps(25, 10).last(), Some(&25));
+        assert_eq!(fast_forward_steps(0, 10), Vec::<usize>::new());
+        let seq = SynthParams::default();
+        let mut n = core();
+        for t in 0..30 {
+            let (m, _) = image(&seq, t);
+            n.on_image(CameraMsg::Raw(&m), Instant::now());
+        }
+        let (r, out) = n.on_reinit(&req(
+            seq.truth(4),
+            Time {
+                sec: 104,
+                nanosec: 0,
+            },
+        ));
+        assert!(r.success, "{}", r.message);
+        assert!(
+            r.message.contains("10 of the 25 newer frames"),
+            "{}",
+            r.message
+        );
+        let b = crate::convert::bbox_from_detection(&out.unwrap().detections.detections[0]);
+        assert!(b.center().distance(&seq.truth(29).center()) < 5.0);
+    }
+
+    #[test]
+    fn the_gate_admits_a_burst_then_the_steady_rate() {
+        let mut g = ReinitGate::new(2.0, 5);
+        let t = Instant::now();
+        let admitted = (0..200).filter(|_| g.admit(t).is_ok()).count();
+        assert_eq!(admitted, 5);
+        let e = g.admit(t).unwrap_err();
+        assert!(
+            e.contains("rate limit") && e.contains("current track kept"),
+            "{e}"
+        );
+        // One second later: two more.
+        let t1 = t + Duration::from_secs(1);
+        assert_eq!((0..10).filter(|_| g.admit(t1).is_ok()).count(), 2);
+        // A long quiet period refills only up to the burst.
+        let t2 = t1 + Duration::from_secs(3600);
+        assert_eq!((0..10).filter(|_| g.admit(t2).is_ok()).count(), 5);
+        // Non-finite or zero rates never refill and never panic.
+        let mut z = ReinitGate::new(f64::NAN, 1);
+        assert!(z.admit(t).is_ok());
+        assert!(z.admit(t2).is_err());
+        let mut n = core();
+        let refused = (0..200)
+            .filter_map(|_| n.admit_reinit(t).err())
+            .collect::<Vec<_>>();
+        assert_eq!(refused.len(), 195);
+        assert!(refused
+            .iter()
+            .all(|r| !r.success && r.message.contains("rate limit")));
+    }
+
+    #[test]
+    fn long_frame_ids_are_clipped_in_replies_and_diagnostics() {
+        let seq = SynthParams::default();
+        let mut n = core();
+        let (mut m, t0) = image(&seq, 0);
+        m.header.frame_id = "c".repeat(10_000);
+        n.on_image(CameraMsg::Raw(&m), Instant::now());
+        let mut r = req(t0, Time::default());
+        r.frame_id = "f".repeat(10_000);
+        let (resp, _) = n.on_reinit(&r);
+        assert!(!resp.success);
+        assert!(resp.message.len() < 400, "{} bytes", resp.message.len());
+        let d = n.diagnostics();
+        assert!(d.status[0].hardware_id.len() < 100);
+        assert!(d.header.frame_id.len() < 100);
+        let mut bad = m.clone();
+        bad.encoding = "e".repeat(10_000);
+        let o = n.on_image(CameraMsg::Raw(&bad), Instant::now());
+        assert!(o.status.reason.len() < 400);
+        assert!(n.diagnostics().status[0].message.len() < 400);
     }
 
     #[test]

@@ -2,7 +2,12 @@
 //! for rgb8/bgr8/rgba8/bgra8/mono8; YUV 4:2:2 and JPEG/PNG decoded into a reusable
 //! buffer), tracker outputs to `vision_msgs/Detection2DArray`.
 //!
-//! Untrusted sizes are checked before anything is allocated from them.
+//! Untrusted sizes are checked before anything is allocated from them: a frame's width,
+//! height and pixel count are checked against [`ImageLimits`] from the message fields (raw
+//! images) or from the compressed header, read without decoding; the decoder then runs
+//! with explicit [`image::Limits`]. A compressed image must also be complete (a JPEG ends
+//! with its EOI marker, a PNG with its IEND chunk): the JPEG decoder fills a truncated
+//! image with grey instead of failing, and such a frame must not be learned.
 
 use bevt_core::image::MAX_FRAME_SIDE;
 use bevt_core::{BBox, Frame, PixelFormat, TrackOutput};
@@ -15,8 +20,103 @@ use bevt_msgs::vision_msgs::{
 };
 use thiserror::Error;
 
-/// Largest decoded image accepted from a compressed message, bytes.
-pub const MAX_DECODED_BYTES: u64 = 256 << 20;
+/// Most bytes per pixel a decoder may produce before conversion to RGB8 (16-bit RGBA).
+pub const MAX_DECODED_BYTES_PER_PIXEL: u64 = 8;
+/// Bytes per pixel of the RGB8 conversion buffer (YUV and compressed input).
+pub const RGB_BYTES_PER_PIXEL: u64 = 3;
+/// Most bytes per pixel of a frame the node keeps (rgba8/bgra8).
+pub const MAX_FRAME_BYTES_PER_PIXEL: u64 = 4;
+/// Memory the decoder may use to parse a compressed header (ICC profiles, text chunks).
+const HEADER_ALLOC_BYTES: u64 = 4 << 20;
+/// Characters of a peer-supplied string (encoding, format, frame_id) echoed in reasons,
+/// diagnostics and logs; longer strings are cut and end with `…`.
+pub const MAX_ECHO_CHARS: usize = 64;
+/// Trailing zero bytes tolerated after a JPEG's EOI marker (some cameras pad buffers).
+const JPEG_MAX_TRAILING_ZEROS: usize = 4096;
+/// JPEG end-of-image marker.
+const JPEG_EOI: [u8; 2] = [0xFF, 0xD9];
+/// A PNG's final chunk: length 0, type `IEND`, CRC.
+const PNG_IEND: [u8; 12] = [0, 0, 0, 0, b'I', b'E', b'N', b'D', 0xAE, 0x42, 0x60, 0x82];
+
+/// A peer-supplied string as echoed in reasons and logs: at most [`MAX_ECHO_CHARS`]
+/// characters, then `…`.
+pub fn clip(s: &str) -> String {
+    match s.char_indices().nth(MAX_ECHO_CHARS) {
+        Some((i, _)) => format!("{}…", &s[..i]),
+        None => s.to_string(),
+    }
+}
+
+/// Largest camera frame the node accepts. Checked before any pixel is decoded or copied.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ImageLimits {
+    /// Largest width, pixels.
+    pub max_width: u32,
+    /// Largest height, pixels.
+    pub max_height: u32,
+    /// Largest width × height, pixels.
+    pub max_pixels: u64,
+}
+
+impl Default for ImageLimits {
+    /// 4096 × 4096 and 16 MP: above any drone camera's stream.
+    fn default() -> Self {
+        Self {
+            max_width: 4096,
+            max_height: 4096,
+            max_pixels: 16 << 20,
+        }
+    }
+}
+
+impl ImageLimits {
+    /// Checks a frame's size.
+    ///
+    /// # Errors
+    /// [`ConvertError::Malformed`] for an empty frame, [`ConvertError::TooLarge`] for one
+    /// over a limit.
+    pub fn check(&self, width: u32, height: u32) -> Result<(usize, usize), ConvertError> {
+        if width == 0 || height == 0 {
+            return Err(ConvertError::Malformed(format!(
+                "empty image {width}x{height}"
+            )));
+        }
+        let pixels = width as u64 * height as u64;
+        let over = if width > self.max_width {
+            Some(format!(
+                "width {width} > max_image_width {}",
+                self.max_width
+            ))
+        } else if height > self.max_height {
+            Some(format!(
+                "height {height} > max_image_height {}",
+                self.max_height
+            ))
+        } else if pixels > self.max_pixels {
+            Some(format!(
+                "{pixels} pixels > max_image_pixels {}",
+                self.max_pixels
+            ))
+        } else if width as usize > MAX_FRAME_SIDE || height as usize > MAX_FRAME_SIDE {
+            Some(format!("a side exceeds the maximum {MAX_FRAME_SIDE}"))
+        } else {
+            None
+        };
+        match over {
+            Some(reason) => Err(ConvertError::TooLarge {
+                width,
+                height,
+                reason,
+            }),
+            None => Ok((width as usize, height as usize)),
+        }
+    }
+
+    /// Bytes the decoder may allocate for one frame of these limits.
+    pub fn decode_bytes(&self) -> u64 {
+        self.max_pixels.saturating_mul(MAX_DECODED_BYTES_PER_PIXEL)
+    }
+}
 
 /// Why an image message cannot be used.
 #[derive(Debug, Error, Clone, PartialEq)]
@@ -28,6 +128,16 @@ pub enum ConvertError {
     /// Width, height, step and data length disagree, or a size is absurd.
     #[error("malformed image: {0}")]
     Malformed(String),
+    /// The frame is larger than the node's limits; nothing was decoded or kept.
+    #[error("image {width}x{height} rejected: {reason}")]
+    TooLarge {
+        /// Declared width.
+        width: u32,
+        /// Declared height.
+        height: u32,
+        /// Which limit it exceeds.
+        reason: String,
+    },
     /// A compressed image could not be decoded.
     #[error("cannot decode {format} image: {reason}")]
     Decode {
@@ -44,17 +154,21 @@ pub struct PixelBuffer {
     rgb: Vec<u8>,
 }
 
-fn check_geometry(width: u32, height: u32) -> Result<(usize, usize), ConvertError> {
-    let (w, h) = (width as usize, height as usize);
-    if w == 0 || h == 0 {
-        return Err(ConvertError::Malformed(format!("empty image {w}x{h}")));
+impl PixelBuffer {
+    /// Bytes held (capacity), for memory accounting.
+    pub fn capacity(&self) -> usize {
+        self.rgb.capacity()
     }
-    if w > MAX_FRAME_SIDE || h > MAX_FRAME_SIDE {
-        return Err(ConvertError::Malformed(format!(
-            "{w}x{h} exceeds the maximum side {MAX_FRAME_SIDE}"
-        )));
+
+    /// Sets the buffer to `len` bytes, giving memory back when it holds much more than
+    /// that (after a larger frame).
+    fn reset_to(&mut self, len: usize) {
+        if self.rgb.capacity() > len.saturating_mul(2) {
+            self.rgb = Vec::new();
+        }
+        self.rgb.clear();
+        self.rgb.resize(len, 0);
     }
-    Ok((w, h))
 }
 
 /// YUV 4:2:2 byte order: offsets of (Y0, U, Y1, V) in each 4-byte pair of pixels.
@@ -84,12 +198,14 @@ fn yuv_to_rgb(y: f32, u: f32, v: f32) -> [u8; 3] {
 /// not directly usable.
 ///
 /// # Errors
-/// [`ConvertError`] for unsupported encodings and sizes that disagree with the data.
+/// [`ConvertError`] for unsupported encodings, sizes that disagree with the data, and
+/// frames over `limits`.
 pub fn frame_from_image<'a>(
     msg: &'a Image,
     buf: &'a mut PixelBuffer,
+    limits: &ImageLimits,
 ) -> Result<Frame<'a>, ConvertError> {
-    let (w, h) = check_geometry(msg.width, msg.height)?;
+    let (w, h) = limits.check(msg.width, msg.height)?;
     let enc = msg.encoding.to_ascii_lowercase();
     let step = msg.step as usize;
     let expect = step
@@ -114,15 +230,15 @@ pub fn frame_from_image<'a>(
             .map_err(|e| ConvertError::Malformed(e.to_string()));
     }
     let Some(order) = yuv422_order(&enc) else {
-        return Err(ConvertError::UnsupportedEncoding(msg.encoding.clone()));
+        return Err(ConvertError::UnsupportedEncoding(clip(&msg.encoding)));
     };
     if w % 2 != 0 || step < 2 * w {
         return Err(ConvertError::Malformed(format!(
             "{} needs an even width and step ≥ 2×width, got width {w}, step {step}",
-            msg.encoding
+            clip(&msg.encoding)
         )));
     }
-    buf.rgb.resize(w * h * 3, 0);
+    buf.reset_to(w * h * 3);
     for r in 0..h {
         let src = &msg.data[r * step..r * step + 2 * w];
         let dst = &mut buf.rgb[r * w * 3..(r + 1) * w * 3];
@@ -141,14 +257,30 @@ pub fn frame_from_image<'a>(
         .map_err(|e| ConvertError::Malformed(e.to_string()))
 }
 
+/// True when `data` is a whole JPEG or PNG stream: it ends with the JPEG EOI marker
+/// (trailing zero padding allowed) or the PNG IEND chunk.
+fn is_complete(kind: image::ImageFormat, data: &[u8]) -> bool {
+    match kind {
+        image::ImageFormat::Png => data.ends_with(&PNG_IEND),
+        _ => {
+            let zeros = data.iter().rev().take_while(|&&b| b == 0).count();
+            zeros <= JPEG_MAX_TRAILING_ZEROS && data[..data.len() - zeros].ends_with(&JPEG_EOI)
+        }
+    }
+}
+
 /// A [`Frame`] of a decoded `sensor_msgs/CompressedImage` (JPEG or PNG).
 ///
+/// The size is read from the header and checked against `limits` before anything is
+/// decoded; the decoder then runs with explicit [`image::Limits`] (dimensions and
+/// [`ImageLimits::decode_bytes`]), and the stream must be complete.
+///
 /// # Errors
-/// [`ConvertError`] for other formats, corrupt data, or images larger than
-/// [`MAX_DECODED_BYTES`] / [`MAX_FRAME_SIDE`] (checked from the header before decoding).
+/// [`ConvertError`] for other formats, corrupt or truncated data, or images over `limits`.
 pub fn frame_from_compressed<'a>(
     msg: &CompressedImage,
     buf: &'a mut PixelBuffer,
+    limits: &ImageLimits,
 ) -> Result<Frame<'a>, ConvertError> {
     let fmt = msg.format.to_ascii_lowercase();
     let kind = if fmt.contains("jpeg") || fmt.contains("jpg") {
@@ -156,21 +288,47 @@ pub fn frame_from_compressed<'a>(
     } else if fmt.contains("png") {
         image::ImageFormat::Png
     } else {
-        return Err(ConvertError::UnsupportedEncoding(msg.format.clone()));
+        return Err(ConvertError::UnsupportedEncoding(clip(&msg.format)));
     };
     let err = |e: &dyn std::fmt::Display| ConvertError::Decode {
-        format: msg.format.clone(),
-        reason: e.to_string(),
+        format: clip(&msg.format),
+        reason: clip(&e.to_string()),
     };
+    // 1. The header alone: dimensions, with only a small allocation allowed.
+    let mut header_limits = image::Limits::default();
+    header_limits.max_alloc = Some(HEADER_ALLOC_BYTES);
     let mut reader = image::ImageReader::with_format(std::io::Cursor::new(&msg.data), kind);
-    let mut limits = image::Limits::default();
-    limits.max_image_width = Some(MAX_FRAME_SIDE as u32);
-    limits.max_image_height = Some(MAX_FRAME_SIDE as u32);
-    limits.max_alloc = Some(MAX_DECODED_BYTES);
-    reader.limits(limits);
-    let img = reader.decode().map_err(|e| err(&e))?.into_rgb8();
-    let (w, h) = check_geometry(img.width(), img.height())?;
-    buf.rgb = img.into_raw();
+    reader.limits(header_limits);
+    let (width, height) = reader.into_dimensions().map_err(|e| err(&e))?;
+    let (w, h) = limits.check(width, height)?;
+    // 2. A truncated stream is an error, not a partly grey frame.
+    if !is_complete(kind, &msg.data) {
+        return Err(ConvertError::Decode {
+            format: clip(&msg.format),
+            reason: format!(
+                "truncated data ({} bytes): no {} at the end",
+                msg.data.len(),
+                if kind == image::ImageFormat::Png {
+                    "IEND chunk"
+                } else {
+                    "EOI marker"
+                }
+            ),
+        });
+    }
+    // 3. Decode under explicit limits.
+    let mut decode_limits = image::Limits::default();
+    decode_limits.max_image_width = Some(limits.max_width);
+    decode_limits.max_image_height = Some(limits.max_height);
+    decode_limits.max_alloc = Some(limits.decode_bytes());
+    let mut reader = image::ImageReader::with_format(std::io::Cursor::new(&msg.data), kind);
+    reader.limits(decode_limits);
+    let img = reader.decode().map_err(|e| err(&e))?;
+    if (img.width(), img.height()) != (width, height) {
+        return Err(err(&"decoded size differs from the header"));
+    }
+    buf.reset_to(0);
+    buf.rgb = img.into_rgb8().into_raw();
     Frame::packed(&buf.rgb, w, h, PixelFormat::Rgb8)
         .map_err(|e| ConvertError::Malformed(e.to_string()))
 }
@@ -247,6 +405,12 @@ pub fn bbox_from_detection(d: &Detection2D) -> BBox {
 mod tests {
     use super::*;
 
+    const L: ImageLimits = ImageLimits {
+        max_width: 4096,
+        max_height: 4096,
+        max_pixels: 16 << 20,
+    };
+
     fn img(enc: &str, w: u32, h: u32, step: u32, data: Vec<u8>) -> Image {
         Image {
             encoding: enc.into(),
@@ -262,7 +426,7 @@ mod tests {
     fn direct_encodings_are_zero_copy_views() {
         let m = img("bgr8", 2, 2, 8, vec![1; 16]);
         let mut b = PixelBuffer::default();
-        let f = frame_from_image(&m, &mut b).unwrap();
+        let f = frame_from_image(&m, &mut b, &L).unwrap();
         assert_eq!(
             (f.width(), f.height(), f.stride(), f.format()),
             (2, 2, 8, PixelFormat::Bgr8)
@@ -282,8 +446,8 @@ mod tests {
         ] {
             assert!(
                 matches!(
-                    frame_from_image(&m, &mut b),
-                    Err(ConvertError::Malformed(_))
+                    frame_from_image(&m, &mut b, &L),
+                    Err(ConvertError::Malformed(_) | ConvertError::TooLarge { .. })
                 ),
                 "{m:?}"
             );
@@ -293,7 +457,7 @@ mod tests {
     #[test]
     fn unsupported_encodings_are_named() {
         let mut b = PixelBuffer::default();
-        let e = frame_from_image(&img("16UC1", 1, 1, 2, vec![0; 2]), &mut b).unwrap_err();
+        let e = frame_from_image(&img("16UC1", 1, 1, 2, vec![0; 2]), &mut b, &L).unwrap_err();
         assert!(e.to_string().contains("16UC1"), "{e}");
     }
 
@@ -302,7 +466,7 @@ mod tests {
         let mut b = PixelBuffer::default();
         // UYVY: mid grey (Y=126, U=V=128) → about 128 on every channel.
         let m = img("yuv422", 2, 1, 4, vec![128, 126, 128, 126]);
-        let f = frame_from_image(&m, &mut b).unwrap();
+        let f = frame_from_image(&m, &mut b, &L).unwrap();
         assert!(
             f.data()[..6].iter().all(|&v| (v as i32 - 128).abs() <= 1),
             "{:?}",
@@ -310,10 +474,10 @@ mod tests {
         );
         // YUYV: saturated red (Y=81, U=90, V=240).
         let m = img("yuv422_yuy2", 2, 1, 4, vec![81, 90, 81, 240]);
-        let f = frame_from_image(&m, &mut b).unwrap();
+        let f = frame_from_image(&m, &mut b, &L).unwrap();
         let px = &f.data()[..3];
         assert!(px[0] > 240 && px[1] < 15 && px[2] < 15, "{px:?}");
-        assert!(frame_from_image(&img("yuv422", 3, 1, 6, vec![0; 6]), &mut b).is_err());
+        assert!(frame_from_image(&img("yuv422", 3, 1, 6, vec![0; 6]), &mut b, &L).is_err());
     }
 
     #[test]
@@ -328,7 +492,7 @@ mod tests {
             data: png,
             ..Default::default()
         };
-        let f = frame_from_compressed(&m, &mut b).unwrap();
+        let f = frame_from_compressed(&m, &mut b, &L).unwrap();
         assert_eq!((f.width(), f.height()), (4, 3));
         assert_eq!(&f.data()[..3], &[10, 20, 30]);
         let bad = CompressedImage {
@@ -337,7 +501,7 @@ mod tests {
             ..Default::default()
         };
         assert!(matches!(
-            frame_from_compressed(&bad, &mut b),
+            frame_from_compressed(&bad, &mut b, &L),
             Err(ConvertError::Decode { .. })
         ));
         let tiff = CompressedImage {
@@ -345,9 +509,181 @@ mod tests {
             ..Default::default()
         };
         assert!(matches!(
-            frame_from_compressed(&tiff, &mut b),
+            frame_from_compressed(&tiff, &mut b, &L),
             Err(ConvertError::UnsupportedEncoding(_))
         ));
+    }
+
+    fn encode(img: &image::DynamicImage, fmt: image::ImageFormat) -> Vec<u8> {
+        let mut out = Vec::new();
+        img.write_to(&mut std::io::Cursor::new(&mut out), fmt)
+            .unwrap();
+        out
+    }
+
+    fn textured(w: u32, h: u32) -> image::DynamicImage {
+        image::DynamicImage::ImageRgb8(image::RgbImage::from_fn(w, h, |x, y| {
+            image::Rgb([(x * 7 + y * 3) as u8, (x * y) as u8, (x ^ y) as u8])
+        }))
+    }
+
+    fn compressed(format: &str, data: Vec<u8>) -> CompressedImage {
+        CompressedImage {
+            format: format.into(),
+            data,
+            ..Default::default()
+        }
+    }
+
+    /// CRC-32 (IEEE) of PNG chunks.
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut c = 0xFFFF_FFFFu32;
+        for &b in bytes {
+            c ^= b as u32;
+            for _ in 0..8 {
+                c = if c & 1 != 0 {
+                    (c >> 1) ^ 0xEDB8_8320
+                } else {
+                    c >> 1
+                };
+            }
+        }
+        !c
+    }
+
+    /// A small valid PNG whose IHDR declares `w`×`h` (CRC fixed): a decompression bomb's
+    /// header.
+    fn png_declaring(w: u32, h: u32) -> Vec<u8> {
+        let mut png = encode(
+            &image::DynamicImage::ImageLuma8(image::GrayImage::new(8, 8)),
+            image::ImageFormat::Png,
+        );
+        png[16..20].copy_from_slice(&w.to_be_bytes());
+        png[20..24].copy_from_slice(&h.to_be_bytes());
+        let crc = crc32(&png[12..29]);
+        png[29..33].copy_from_slice(&crc.to_be_bytes());
+        png
+    }
+
+    /// A small valid JPEG whose SOF0 declares `w`×`h`.
+    fn jpeg_declaring(w: u16, h: u16) -> Vec<u8> {
+        let mut jpg = encode(&textured(16, 16), image::ImageFormat::Jpeg);
+        let sof = jpg
+            .windows(2)
+            .position(|p| p == [0xFF, 0xC0])
+            .expect("baseline SOF0");
+        jpg[sof + 5..sof + 7].copy_from_slice(&h.to_be_bytes());
+        jpg[sof + 7..sof + 9].copy_from_slice(&w.to_be_bytes());
+        jpg
+    }
+
+    #[test]
+    fn image_bombs_are_rejected_from_the_header_without_decoding() {
+        let mut b = PixelBuffer::default();
+        let jpg = jpeg_declaring(16000, 16000);
+        assert!(jpg.len() < 1000, "{} bytes", jpg.len());
+        let png = png_declaring(16000, 16000);
+        for (m, name) in [
+            (compressed("jpeg", jpg), "jpeg"),
+            (compressed("png", png), "png"),
+        ] {
+            match frame_from_compressed(&m, &mut b, &L) {
+                Err(ConvertError::TooLarge {
+                    width,
+                    height,
+                    reason,
+                }) => {
+                    assert_eq!((width, height), (16000, 16000), "{name}");
+                    assert!(reason.contains("max_image_width"), "{name}: {reason}");
+                }
+                other => panic!("{name}: {other:?}"),
+            }
+            assert_eq!(b.capacity(), 0, "{name}: nothing was decoded");
+        }
+        // Each limit is applied and named.
+        let small = ImageLimits {
+            max_width: 100,
+            max_height: 50,
+            max_pixels: 3000,
+        };
+        for (w, h, why) in [
+            (101, 10, "max_image_width"),
+            (10, 51, "max_image_height"),
+            (100, 31, "max_image_pixels"),
+        ] {
+            let m = compressed("png", png_declaring(w, h));
+            let e = frame_from_compressed(&m, &mut b, &small).unwrap_err();
+            assert!(e.to_string().contains(why), "{w}x{h}: {e}");
+            let raw = img("mono8", w, h, w, vec![0; (w * h) as usize]);
+            let e = frame_from_image(&raw, &mut b, &small).unwrap_err();
+            assert!(e.to_string().contains(why), "raw {w}x{h}: {e}");
+        }
+        let ok = compressed("png", encode(&textured(100, 30), image::ImageFormat::Png));
+        assert!(frame_from_compressed(&ok, &mut b, &small).is_ok());
+    }
+
+    #[test]
+    fn truncated_jpeg_and_png_are_errors() {
+        let mut b = PixelBuffer::default();
+        let img = textured(320, 240);
+        let jpg = encode(&img, image::ImageFormat::Jpeg);
+        let png = encode(&img, image::ImageFormat::Png);
+        // Whole streams decode; zero padding after the JPEG's EOI is tolerated.
+        let mut padded = jpg.clone();
+        padded.extend([0; 16]);
+        for m in [
+            compressed("jpeg", jpg.clone()),
+            compressed("jpeg", padded),
+            compressed("png", png.clone()),
+        ] {
+            let f = frame_from_compressed(&m, &mut b, &L).unwrap();
+            assert_eq!((f.width(), f.height()), (320, 240));
+        }
+        for (m, what) in [
+            (compressed("jpeg", jpg[..jpg.len() / 2].to_vec()), "EOI"),
+            (compressed("jpeg", jpg[..jpg.len() - 2].to_vec()), "EOI"),
+            (compressed("png", png[..png.len() / 2].to_vec()), ""),
+            (compressed("png", png[..png.len() - 12].to_vec()), "IEND"),
+        ] {
+            let e = frame_from_compressed(&m, &mut b, &L).unwrap_err();
+            assert!(matches!(e, ConvertError::Decode { .. }), "{e}");
+            assert!(e.to_string().contains(what), "{e}");
+        }
+    }
+
+    #[test]
+    fn grey_png_is_expanded_within_the_limits_and_the_buffer_shrinks() {
+        let mut b = PixelBuffer::default();
+        let grey = image::DynamicImage::ImageLuma8(image::GrayImage::from_pixel(
+            640,
+            480,
+            image::Luma([77]),
+        ));
+        let m = compressed("png", encode(&grey, image::ImageFormat::Png));
+        let f = frame_from_compressed(&m, &mut b, &L).unwrap();
+        assert_eq!(&f.data()[..3], &[77, 77, 77]);
+        assert!(b.capacity() >= 640 * 480 * 3);
+        // A much smaller YUV frame afterwards: the buffer gives the memory back.
+        let y = img("yuv422", 2, 1, 4, vec![128, 126, 128, 126]);
+        frame_from_image(&y, &mut b, &L).unwrap();
+        assert!(b.capacity() < 1024, "{}", b.capacity());
+    }
+
+    #[test]
+    fn long_peer_strings_are_clipped_in_reasons() {
+        let mut b = PixelBuffer::default();
+        let long = "x".repeat(10_000);
+        let e = frame_from_image(&img(&long, 1, 1, 1, vec![0]), &mut b, &L).unwrap_err();
+        let s = e.to_string();
+        assert!(s.len() < 400, "{} chars", s.len());
+        assert!(
+            s.contains(&format!("{}…", "x".repeat(MAX_ECHO_CHARS))),
+            "{s}"
+        );
+        let e = frame_from_compressed(&compressed(&long, vec![]), &mut b, &L).unwrap_err();
+        assert!(e.to_string().len() < 400);
+        assert_eq!(clip("short"), "short");
+        assert_eq!(clip(&"é".repeat(100)).chars().count(), MAX_ECHO_CHARS + 1);
     }
 
     #[test]

@@ -68,7 +68,10 @@ fn demo(launch: Launch, stop: Arc<AtomicBool>) -> Result<()> {
         ),
         None => println!("ground station: reinit timed out"),
     }
-    let end = Instant::now() + launch.demo_duration;
+    // The duration is range-checked at start-up; the addition is checked all the same.
+    let end = Instant::now()
+        .checked_add(launch.demo_duration)
+        .context("--duration is too long")?;
     let mut next_print = Instant::now() + Duration::from_secs(1);
     let mut last = None;
     while Instant::now() < end && !stop.load(Ordering::Relaxed) {

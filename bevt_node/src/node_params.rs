@@ -4,12 +4,16 @@
 //! the `ROS_DOMAIN_ID` / `ROS_LOCALHOST_ONLY` environment variables (which ros2-client
 //! itself ignores).
 //!
-//! Parameters (see `config/node.yaml`): `domain_id`, `network_interfaces` (addresses;
-//! `[]` = all; default loopback only), `service_mapping` (`enhanced` | `cyclone`),
-//! `reinit_buffer_frames`, `stale_timeout_s`, `diagnostics_period_s`,
-//! `debug_image_rate_hz` (0 = off), `class_id`, and
-//! every tracker key as `tracker.<section>.<key>` (as in `config/bevt.yaml`).
-//! Unknown or invalid parameters stop start-up with a message naming them.
+//! Parameters (see `config/node.yaml`, where each one's range is given): `domain_id`,
+//! `network_interfaces` (addresses; `[]` = all; default loopback only), `service_mapping`
+//! (`enhanced` | `cyclone`), `max_image_width`, `max_image_height`, `max_image_pixels`,
+//! `reinit_buffer_frames`, `reinit_buffer_mb`, `reinit_max_fast_forward`,
+//! `reinit_rate_hz`, `reinit_burst`, `stale_timeout_s`, `diagnostics_period_s`,
+//! `debug_image_rate_hz` (0 = off), `class_id`, and every tracker key as
+//! `tracker.<section>.<key>` (as in `config/bevt.yaml`, ranges in
+//! `TrackerConfig::validate`). Every number has a range that bounds the work and memory
+//! it implies ([`ranges`]); unknown parameters and values outside a range stop start-up
+//! with a message naming the parameter and its range.
 
 use crate::app::NodeSettings;
 use crate::params::load_config;
@@ -55,6 +59,60 @@ pub struct Launch {
     pub demo: bool,
     /// Demo duration.
     pub demo_duration: Duration,
+}
+
+/// The accepted range of every numeric node parameter (inclusive).
+pub mod ranges {
+    /// `max_image_width`, `max_image_height`: pixels (the core's frame side limit).
+    pub const IMAGE_SIDE: (u64, u64) = (16, 32768);
+    /// `max_image_pixels`: pixels (64 MP: 512 MiB of decoder output at most).
+    pub const IMAGE_PIXELS: (u64, u64) = (256, 64 << 20);
+    /// `reinit_buffer_frames`: frames.
+    pub const BUFFER_FRAMES: (u64, u64) = (1, 1000);
+    /// `reinit_buffer_mb`: MiB; also at least one largest frame (4 bytes × `max_image_pixels`).
+    pub const BUFFER_MB: (u64, u64) = (1, 4096);
+    /// `reinit_max_fast_forward`: frames tracked per request.
+    pub const FAST_FORWARD: (u64, u64) = (0, 100);
+    /// `reinit_rate_hz`: requests per second.
+    pub const REINIT_RATE_HZ: (f64, f64) = (0.01, 100.0);
+    /// `reinit_burst`: requests.
+    pub const REINIT_BURST: (u64, u64) = (1, 100);
+    /// `stale_timeout_s`: seconds.
+    pub const STALE_TIMEOUT_S: (f64, f64) = (0.05, 3600.0);
+    /// `diagnostics_period_s`: seconds.
+    pub const DIAGNOSTICS_PERIOD_S: (f64, f64) = (0.01, 3600.0);
+    /// `debug_image_rate_hz` when not 0 (off): Hz.
+    pub const DEBUG_IMAGE_RATE_HZ: (f64, f64) = (0.01, 100.0);
+    /// `class_id`: characters.
+    pub const CLASS_ID_CHARS: (u64, u64) = (1, 256);
+    /// `bevt_node --demo --duration`: seconds.
+    pub const DEMO_DURATION_S: (f64, f64) = (0.1, 86400.0);
+}
+
+/// Bytes in a MiB.
+const MIB: u64 = 1 << 20;
+
+/// `v` as a number of seconds within `range`.
+fn seconds(name: &str, v: f64, range: (f64, f64)) -> Result<Duration, LaunchError> {
+    let v = float_in(name, v, range, "s")?;
+    Duration::try_from_secs_f64(v).map_err(|e| param_err(name, e.to_string()))
+}
+
+fn float_in(name: &str, v: f64, (lo, hi): (f64, f64), unit: &str) -> Result<f64, LaunchError> {
+    if v.is_finite() && (lo..=hi).contains(&v) {
+        Ok(v)
+    } else {
+        Err(param_err(
+            name,
+            format!("{v} is outside {lo}..={hi} {unit}"),
+        ))
+    }
+}
+
+fn int_in(name: &str, v: &Value, (lo, hi): (u64, u64)) -> Result<u64, LaunchError> {
+    v.as_u64()
+        .filter(|n| (lo..=hi).contains(n))
+        .ok_or_else(|| param_err(name, format!("expected an integer {lo}..={hi}")))
 }
 
 fn param_err(name: &str, reason: impl Into<String>) -> LaunchError {
@@ -144,10 +202,7 @@ pub fn launch_from_args(
                 let s: f64 = v
                     .parse()
                     .map_err(|_| LaunchError::Args(format!("--duration {v:?}: not a number")))?;
-                if !(s.is_finite() && s > 0.0) {
-                    return Err(LaunchError::Args("--duration must be positive".into()));
-                }
-                demo_duration = Duration::from_secs_f64(s);
+                demo_duration = seconds("--duration", s, ranges::DEMO_DURATION_S)?;
             }
             "--params-file" if ros => files.push(next("--params-file")?),
             "-p" | "--param" if ros => {
@@ -248,38 +303,52 @@ pub fn launch_from_args(
                     }
                 }
             }
-            "reinit_buffer_frames" => {
-                node.reinit_buffer_frames = usize::try_from(as_u64()?)
-                    .ok()
-                    .filter(|n| (1..=1000).contains(n))
-                    .ok_or_else(|| param_err(k, "expected 1..=1000"))?
+            "max_image_width" => {
+                node.image_limits.max_width = int_in(k, v, ranges::IMAGE_SIDE)? as u32
             }
+            "max_image_height" => {
+                node.image_limits.max_height = int_in(k, v, ranges::IMAGE_SIDE)? as u32
+            }
+            "max_image_pixels" => {
+                node.image_limits.max_pixels = int_in(k, v, ranges::IMAGE_PIXELS)?
+            }
+            "reinit_buffer_frames" => {
+                node.reinit_buffer_frames = int_in(k, v, ranges::BUFFER_FRAMES)? as usize
+            }
+            "reinit_buffer_mb" => {
+                node.reinit_buffer_bytes = (int_in(k, v, ranges::BUFFER_MB)? * MIB) as usize
+            }
+            "reinit_max_fast_forward" => {
+                node.reinit_max_fast_forward = int_in(k, v, ranges::FAST_FORWARD)? as usize
+            }
+            "reinit_rate_hz" => {
+                node.reinit_rate_hz = float_in(k, as_f64()?, ranges::REINIT_RATE_HZ, "Hz")?
+            }
+            "reinit_burst" => node.reinit_burst = int_in(k, v, ranges::REINIT_BURST)? as u32,
             "stale_timeout_s" => {
-                let s = as_f64()?;
-                if !(s.is_finite() && s > 0.0) {
-                    return Err(param_err(k, "expected a positive number of seconds"));
-                }
-                node.stale_timeout = Duration::from_secs_f64(s);
+                node.stale_timeout = seconds(k, as_f64()?, ranges::STALE_TIMEOUT_S)?
             }
             "diagnostics_period_s" => {
-                let s = as_f64()?;
-                if !(s.is_finite() && s > 0.0) {
-                    return Err(param_err(k, "expected a positive number of seconds"));
-                }
-                ros_settings.diagnostics_period = Duration::from_secs_f64(s);
+                ros_settings.diagnostics_period =
+                    seconds(k, as_f64()?, ranges::DIAGNOSTICS_PERIOD_S)?
             }
             "debug_image_rate_hz" => {
                 let r = as_f64()?;
-                if !(r.is_finite() && (0.0..=100.0).contains(&r)) {
-                    return Err(param_err(k, "expected 0 (off) ..= 100 Hz"));
-                }
-                ros_settings.debug_image_rate_hz = r;
+                ros_settings.debug_image_rate_hz = if r == 0.0 {
+                    0.0
+                } else {
+                    float_in(k, r, ranges::DEBUG_IMAGE_RATE_HZ, "Hz (or 0 = off)")?
+                };
             }
             "class_id" => {
-                node.class_id = v
+                let c = v
                     .as_str()
-                    .ok_or_else(|| param_err(k, "expected a string"))?
-                    .to_string()
+                    .ok_or_else(|| param_err(k, "expected a string"))?;
+                let (lo, hi) = ranges::CLASS_ID_CHARS;
+                if !(lo..=hi).contains(&(c.chars().count() as u64)) {
+                    return Err(param_err(k, format!("expected {lo}..={hi} characters")));
+                }
+                node.class_id = c.to_string();
             }
             name if name.starts_with("tracker.") => {
                 let text = serde_norway::to_string(v).map_err(|e| param_err(k, e.to_string()))?;
@@ -287,6 +356,22 @@ pub fn launch_from_args(
             }
             _ => return Err(param_err(k, "unknown parameter")),
         }
+    }
+    // One largest frame must fit the re-initialisation buffer.
+    let frame_bytes = node
+        .image_limits
+        .max_pixels
+        .saturating_mul(crate::convert::MAX_FRAME_BYTES_PER_PIXEL);
+    if (node.reinit_buffer_bytes as u64) < frame_bytes {
+        return Err(param_err(
+            "reinit_buffer_mb",
+            format!(
+                "{} MiB cannot hold one largest frame ({} MiB = 4 bytes × max_image_pixels {})",
+                node.reinit_buffer_bytes as u64 / MIB,
+                frame_bytes.div_ceil(MIB),
+                node.image_limits.max_pixels
+            ),
+        ));
     }
     let tracker = load_config(None, &tracker_sets)?;
     Ok(Launch {
@@ -368,7 +453,10 @@ mod tests {
     fn the_shipped_parameters_file_loads() {
         let text = include_str!("../../config/node.yaml");
         let p = params_from_file(text, "bevt_node").unwrap();
-        assert!(p.contains_key("domain_id"));
+        assert!(
+            !p.contains_key("domain_id"),
+            "domain_id set by default would override ROS_DOMAIN_ID"
+        );
         let dir = std::env::temp_dir().join(format!("bevt_params2_{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let f = dir.join("node.yaml");
@@ -379,6 +467,84 @@ mod tests {
         )
         .unwrap();
         assert_eq!(l.tracker.config, bevt_core::TrackerConfig::default());
+        assert_eq!(
+            l.node,
+            NodeSettings::default(),
+            "node.yaml states the defaults"
+        );
+        let env = |k: &str| (k == "ROS_DOMAIN_ID").then(|| "17".to_string());
+        let l = launch_from_args(
+            &args(&format!("--ros-args --params-file {}", f.display())),
+            env,
+        )
+        .unwrap();
+        assert_eq!(l.ros.domain_id, 17, "ROS_DOMAIN_ID is honoured");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn every_number_out_of_range_is_refused_by_name_without_panicking() {
+        let none = |_: &str| None;
+        let params = [
+            "max_image_width",
+            "max_image_height",
+            "max_image_pixels",
+            "reinit_buffer_frames",
+            "reinit_buffer_mb",
+            "reinit_max_fast_forward",
+            "reinit_rate_hz",
+            "reinit_burst",
+            "stale_timeout_s",
+            "diagnostics_period_s",
+            "debug_image_rate_hz",
+            "domain_id",
+            "tracker.window.padding",
+            "tracker.window.search_area_scale",
+            "tracker.window.filter_max_area",
+            "tracker.features.hog_cell_size",
+            "tracker.detection.number_of_scales",
+            "tracker.detection.newton_iterations",
+            "tracker.detection.scale_penalty",
+            "tracker.admm.iterations",
+            "tracker.threads",
+        ];
+        for p in params {
+            for v in [
+                "1e20", "1e19", "1e300", "1e-300", "-1", ".nan", ".inf", "-.inf", "1000000",
+            ] {
+                // Values a parameter legitimately takes are skipped.
+                let ok = matches!(
+                    (p, v),
+                    ("debug_image_rate_hz", "-1") | ("tracker.detection.newton_iterations", "-1")
+                ) || (v == "1000000" && p == "max_image_pixels");
+                let r = launch_from_args(&args(&format!("--ros-args -p {p}:={v}")), none);
+                if ok {
+                    continue;
+                }
+                let e = r.map(|_| ()).unwrap_err().to_string();
+                let short = p.trim_start_matches("tracker.");
+                assert!(e.contains(short), "{p}:={v}: {e}");
+            }
+        }
+        for d in ["1e300", "1e20", "1e19", "1e-300", "nan", "inf", "-1", "0"] {
+            let e = launch_from_args(&args(&format!("--demo --duration {d}")), none).unwrap_err();
+            assert!(e.to_string().contains("--duration"), "{d}: {e}");
+        }
+        let l = launch_from_args(&args("--demo --duration 2.5"), none).unwrap();
+        assert_eq!(l.demo_duration, Duration::from_millis(2500));
+        // A buffer too small for one largest frame is refused.
+        let e = launch_from_args(
+            &args("--ros-args -p reinit_buffer_mb:=16 -p max_image_pixels:=16777216"),
+            none,
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("reinit_buffer_mb"), "{e}");
+        let l = launch_from_args(
+            &args("--ros-args -p debug_image_rate_hz:=0 -p reinit_rate_hz:=0.5 -p stale_timeout_s:=3600"),
+            none,
+        )
+        .unwrap();
+        assert_eq!(l.node.reinit_rate_hz, 0.5);
+        assert_eq!(l.node.stale_timeout, Duration::from_secs(3600));
     }
 }

@@ -81,6 +81,9 @@ pub fn load_config(path: Option<&Path>, overrides: &[String]) -> Result<TrackerS
                 .entry(k)
                 .or_insert_with(|| serde_norway::Value::Mapping(Default::default()));
         }
+        // A wrong type is reported against the override that introduced it (the parser's
+        // message does not name the key).
+        serde_norway::from_value::<TrackerConfig>(value.clone()).map_err(|e| parse_err(o, &e))?;
     }
     let cfg: TrackerConfig = serde_norway::from_value(value).map_err(|e| parse_err(&origin, &e))?;
     Ok(cfg.validate()?)
@@ -114,6 +117,8 @@ mod tests {
             load_config(None, &["noequals".into()]),
             Err(ParamsError::Parse { .. })
         ));
+        let e = load_config(None, &["features.hog_cell_size=1e20".into()]).unwrap_err();
+        assert!(e.to_string().contains("features.hog_cell_size"), "{e}");
     }
 
     #[test]

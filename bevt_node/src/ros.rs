@@ -5,6 +5,11 @@
 //! slot (counting the ones it replaces as dropped); the calling thread runs the tracker
 //! on the newest frame, answers services, reads the `init` topic and publishes. The
 //! tracker therefore never falls behind the camera, and DDS reception never waits for it.
+//!
+//! Re-initialisation requests (service and `init` topic) are read every turn of the
+//! worker loop and admitted by the node's rate limit; a refused request is answered at
+//! once with the reason. Each turn then processes the newest camera frame, if any, and
+//! serves at most one admitted request, so requests never starve the camera.
 
 use crate::app::{CameraMsg, FrameOutputs, NodeCore};
 use bevt_msgs::bevt::{ReinitRequest, ReinitResponse, TrackStatus};
@@ -49,6 +54,31 @@ pub mod names {
 
 /// How long the worker waits for a frame before serving requests and timers again.
 const WORKER_WAIT: Duration = Duration::from_millis(10);
+/// Most requests (service and topic each) read from DDS per turn of the worker loop.
+const MAX_REQUESTS_PER_TURN: usize = 1000;
+/// History depth of the request and reply readers/writers of the services: a burst this
+/// large is read, and answered, without DDS dropping any of it.
+const SERVICE_HISTORY_DEPTH: usize = 1000;
+/// Admitted re-initialisation requests waiting for their turn, at most; admission (the
+/// token bucket) keeps far fewer than this.
+const MAX_PENDING_REQUESTS: usize = 64;
+
+/// Longest timer period (diagnostics, debug image): longer settings are refused at load;
+/// this only keeps the timer arithmetic total.
+const MAX_PERIOD: Duration = Duration::from_secs(3600);
+
+/// `now + period`, checked: never panics, whatever the period.
+fn later(now: Instant, period: Duration) -> Instant {
+    now.checked_add(period.min(MAX_PERIOD)).unwrap_or(now)
+}
+
+/// An admitted re-initialisation request waiting to be served.
+enum PendingReinit {
+    /// From the service: answered when served.
+    Service(ros2_client::RmwRequestId, ReinitRequest),
+    /// From the `init` topic: logged when served.
+    Topic(ReinitRequest),
+}
 
 /// Errors of the ROS layer.
 #[derive(Debug, Error)]
@@ -247,7 +277,8 @@ pub fn run(
     } else {
         None
     };
-    let debug_period = Duration::from_secs_f64(1.0 / settings.debug_image_rate_hz.max(1e-3));
+    let debug_period =
+        Duration::try_from_secs_f64(1.0 / settings.debug_image_rate_hz).unwrap_or(MAX_PERIOD);
     let mut next_debug = Instant::now();
     let sub_img = node
         .create_subscription::<Image>(&t_img, Some(cq.clone()))
@@ -267,8 +298,9 @@ pub fn run(
     let pub_diag = node
         .create_publisher::<DiagnosticArray>(&t_diag, Some(oq.clone()))
         .map_err(create_err("diagnostics publisher"))?;
-    let sq =
-        QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast { depth: 10 });
+    let sq = QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast {
+        depth: SERVICE_HISTORY_DEPTH,
+    });
     let srv_reinit = node
         .create_server::<ReinitRequest, ReinitResponse>(
             settings.service_mapping,
@@ -335,32 +367,53 @@ pub fn run(
         let _ = pub_status.publish(o.status.clone());
     };
     let mut next_diag = Instant::now();
+    let mut pending: std::collections::VecDeque<PendingReinit> = Default::default();
     while !shutdown.load(Ordering::Relaxed) {
-        // Requests from the service and the init topic take the same path.
-        let mut reinit = |req: &ReinitRequest, source: &str, core: &mut NodeCore| {
-            let (resp, out) = core.on_reinit(req);
-            let level = if resp.success {
-                ros2_client::log::LogLevel::Info
-            } else {
-                ros2_client::log::LogLevel::Warn
-            };
-            log(&node, level, &format!("{source}: {}", resp.message));
-            if let Some(o) = out {
-                publish(&o);
-                observe(&o);
+        // 1. Read every request that arrived; refuse at once what the rate limit refuses.
+        let admit = |core: &mut NodeCore, len: usize| {
+            if len >= MAX_PENDING_REQUESTS {
+                return Err(ReinitResponse {
+                    success: false,
+                    message: format!("refused: {len} requests already waiting; current track kept"),
+                });
             }
-            resp
+            core.admit_reinit(Instant::now())
         };
-        while let Ok(Some((id, req))) = srv_reinit.receive_request() {
-            let resp = reinit(&req, "reinit", &mut core);
-            let _ = srv_reinit.send_response(id, resp);
+        for _ in 0..MAX_REQUESTS_PER_TURN {
+            let Ok(Some((id, req))) = srv_reinit.receive_request() else {
+                break;
+            };
+            match admit(&mut core, pending.len()) {
+                Ok(()) => pending.push_back(PendingReinit::Service(id, req)),
+                Err(resp) => {
+                    log(
+                        &node,
+                        ros2_client::log::LogLevel::Warn,
+                        &format!("reinit: {}", resp.message),
+                    );
+                    let _ = srv_reinit.send_response(id, resp);
+                }
+            }
         }
-        while let Ok(Some((det, _))) = sub_init.take() {
+        for _ in 0..MAX_REQUESTS_PER_TURN {
+            let Ok(Some((det, _))) = sub_init.take() else {
+                break;
+            };
             let b = crate::convert::bbox_from_detection(&det);
             let req = crate::convert::reinit_request(b, det.header.stamp, &det.header.frame_id);
-            reinit(&req, "init topic", &mut core);
+            match admit(&mut core, pending.len()) {
+                Ok(()) => pending.push_back(PendingReinit::Topic(req)),
+                Err(resp) => log(
+                    &node,
+                    ros2_client::log::LogLevel::Warn,
+                    &format!("init topic: {}", resp.message),
+                ),
+            }
         }
-        while let Ok(Some((id, _))) = srv_stop.receive_request() {
+        for _ in 0..MAX_REQUESTS_PER_TURN {
+            let Ok(Some((id, _))) = srv_stop.receive_request() else {
+                break;
+            };
             let resp = core.on_stop();
             log(
                 &node,
@@ -369,6 +422,7 @@ pub fn run(
             );
             let _ = srv_stop.send_response(id, resp);
         }
+        // 2. The newest camera frame.
         match slot.take(WORKER_WAIT) {
             Some(Incoming::Raw(m, t)) => {
                 core.add_dropped(slot.dropped.swap(0, Ordering::Relaxed));
@@ -382,20 +436,45 @@ pub fn run(
                 publish(&o);
                 observe(&o);
             }
-            Some(Incoming::Error(e)) => log(&node, ros2_client::log::LogLevel::Warn, &e),
+            Some(Incoming::Error(e)) => log(
+                &node,
+                ros2_client::log::LogLevel::Warn,
+                &crate::convert::clip(&e),
+            ),
             None => {}
+        }
+        // 3. At most one admitted request per turn (bounded work: see NodeCore::on_reinit).
+        if let Some(p) = pending.pop_front() {
+            let (req, source) = match &p {
+                PendingReinit::Service(_, r) => (r, "reinit"),
+                PendingReinit::Topic(r) => (r, "init topic"),
+            };
+            let (resp, out) = core.on_reinit(req);
+            let level = if resp.success {
+                ros2_client::log::LogLevel::Info
+            } else {
+                ros2_client::log::LogLevel::Warn
+            };
+            log(&node, level, &format!("{source}: {}", resp.message));
+            if let Some(o) = out {
+                publish(&o);
+                observe(&o);
+            }
+            if let PendingReinit::Service(id, _) = p {
+                let _ = srv_reinit.send_response(id, resp);
+            }
         }
         let now = Instant::now();
         if let Some(p) = &pub_debug {
             if now >= next_debug {
                 if let Some(img) = core.debug_image() {
-                    next_debug = now + debug_period;
+                    next_debug = later(now, debug_period);
                     let _ = p.publish(img);
                 }
             }
         }
         if now >= next_diag {
-            next_diag = now + settings.diagnostics_period;
+            next_diag = later(now, settings.diagnostics_period);
             if let Some(s) = core.on_tick(now) {
                 let _ = pub_status.publish(s);
             }
