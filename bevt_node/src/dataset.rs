@@ -56,6 +56,64 @@ pub enum DatasetError {
     /// A requested sequence is not in the dataset.
     #[error("sequence {0:?} is not in the dataset")]
     UnknownSequence(String),
+    /// One sequence's entry cannot be used (the other sequences still can).
+    #[error("sequence {name}: {reason}")]
+    BadEntry {
+        /// The sequence name.
+        name: String,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// Widest zero-padded frame number (`nz`) accepted: wider is certainly a mistake (and
+/// the formatter cannot pad beyond 65535).
+pub const MAX_NZ: usize = 32;
+
+/// Largest frame number accepted (`start_frame`, `end_frame`).
+pub const MAX_FRAME_NUMBER: usize = 1_000_000_000;
+
+/// Checks a sequence name before it becomes a file name (`<out>/<name>.txt`): one plain
+/// path component, no separators, not `.`/`..`, no control characters.
+///
+/// # Errors
+/// The reason, for a name that could write outside the output folder.
+pub fn check_sequence_name(name: &str) -> Result<(), String> {
+    let bad = name.is_empty()
+        || name == "."
+        || name == ".."
+        || name.starts_with('.')
+        || name
+            .chars()
+            .any(|c| matches!(c, '/' | '\\' | ':') || c.is_control())
+        || std::path::Path::new(name).is_absolute();
+    if bad {
+        Err(format!(
+            "sequence name {:?} is not a plain file name (no separators, no leading dot)",
+            crate::convert::clip(name)
+        ))
+    } else {
+        Ok(())
+    }
+}
+
+/// Names must be safe file names and unique (results are `<out>/<name>.txt`).
+fn check_names<'a>(names: impl Iterator<Item = &'a str>, path: &Path) -> Result<(), DatasetError> {
+    let mut seen = std::collections::BTreeSet::new();
+    for n in names {
+        let err = |reason: String| DatasetError::Manifest {
+            path: path.to_path_buf(),
+            reason,
+        };
+        check_sequence_name(n).map_err(err)?;
+        if !seen.insert(n) {
+            return Err(err(format!(
+                "duplicate sequence name {:?}: results would overwrite each other",
+                crate::convert::clip(n)
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// Where one sequence's frames and annotation live; nothing is read until [`Self::load`].
@@ -122,6 +180,18 @@ impl SequenceEntry {
                 nz,
                 ext,
             } => {
+                let bad = |reason: String| DatasetError::BadEntry {
+                    name: self.name.clone(),
+                    reason,
+                };
+                if *nz > MAX_NZ {
+                    return Err(bad(format!("nz = {nz} exceeds {MAX_NZ} digits")));
+                }
+                if *start > MAX_FRAME_NUMBER || end.is_some_and(|e| e > MAX_FRAME_NUMBER) {
+                    return Err(bad(format!(
+                        "start_frame/end_frame exceed {MAX_FRAME_NUMBER}"
+                    )));
+                }
                 let last = end.unwrap_or(start + truth.len().saturating_sub(1));
                 let n = (last + 1).saturating_sub(*start).min(truth.len());
                 (0..n)
@@ -280,6 +350,7 @@ impl Dataset {
     /// # Errors
     /// [`DatasetError::UnknownSequence`] for a name not in the dataset.
     pub fn select(&mut self, names: &[String]) -> Result<(), DatasetError> {
+        check_names(names.iter().map(String::as_str), Path::new("--sequences"))?;
         let mut out = Vec::with_capacity(names.len());
         for n in names {
             let e = self
@@ -322,6 +393,7 @@ fn open_manifest(root: &Path, path: &Path) -> Result<Dataset, DatasetError> {
         path: path.to_path_buf(),
         reason: e.to_string(),
     })?;
+    check_names(m.sequences.iter().map(|s| s.name.as_str()), path)?;
     let sequences = m
         .sequences
         .into_iter()
@@ -555,6 +627,72 @@ mod tests {
         let s = ds.sequences[0].load()?;
         assert_eq!(s.frames.len(), 2);
         assert!(s.frames[0].ends_with("0001.jpg"));
+        std::fs::remove_dir_all(&dir)?;
+        Ok(())
+    }
+
+    fn manifest(dir: &Path, seqs: &[(&str, usize)]) -> Result<(), Box<dyn std::error::Error>> {
+        std::fs::create_dir_all(dir)?;
+        let list: Vec<_> = seqs
+            .iter()
+            .map(|(n, nz)| {
+                serde_json::json!({"name": n, "img_dir": "img", "anno": "a.txt", "nz": nz})
+            })
+            .collect();
+        std::fs::write(
+            dir.join("sequences.json"),
+            serde_json::json!({ "sequences": list }).to_string(),
+        )?;
+        std::fs::write(dir.join("a.txt"), "1,1,10,10\n2,2,10,10\n")?;
+        Ok(())
+    }
+
+    #[test]
+    fn a_huge_nz_fails_that_sequence_only() -> Result<(), Box<dyn std::error::Error>> {
+        let dir = std::env::temp_dir().join(format!("bevt_nz_{}", std::process::id()));
+        manifest(&dir, &[("wide", 65536), ("widest", usize::MAX), ("ok", 6)])?;
+        let ds = open_dataset(&dir)?;
+        for s in &ds.sequences[..2] {
+            match s.load() {
+                Err(DatasetError::BadEntry { name, reason }) => {
+                    assert_eq!(name, s.name);
+                    assert!(reason.contains("nz"), "{reason}");
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+        let ok = ds.sequences[2].load()?;
+        assert!(ok.frames[0].ends_with("img/000001.jpg"));
+        std::fs::remove_dir_all(&dir)?;
+        Ok(())
+    }
+
+    #[test]
+    fn unsafe_and_duplicate_sequence_names_are_refused() -> Result<(), Box<dyn std::error::Error>> {
+        let dir = std::env::temp_dir().join(format!("bevt_names_{}", std::process::id()));
+        for bad in [
+            "../../x", "/tmp/abs", "a/b", "a\\b", "", "..", ".", ".hidden", "c:x",
+        ] {
+            manifest(&dir, &[("fine", 6), (bad, 6)])?;
+            match open_dataset(&dir) {
+                Err(DatasetError::Manifest { reason, .. }) => {
+                    assert!(
+                        reason.contains("not a plain file name"),
+                        "{bad:?}: {reason}"
+                    )
+                }
+                other => panic!("{bad:?}: {other:?}"),
+            }
+        }
+        manifest(&dir, &[("twice", 6), ("other", 6), ("twice", 6)])?;
+        let e = open_dataset(&dir).unwrap_err().to_string();
+        assert!(e.contains("duplicate sequence name \"twice\""), "{e}");
+        manifest(&dir, &[("a", 6), ("b", 6)])?;
+        let mut ds = open_dataset(&dir)?;
+        assert!(ds.clone().select(&["a".into(), "a".into()]).is_err());
+        ds.select(&["b".into()])?;
+        assert_eq!(ds.sequences.len(), 1);
+        assert!(check_sequence_name("group2_2").is_ok());
         std::fs::remove_dir_all(&dir)?;
         Ok(())
     }

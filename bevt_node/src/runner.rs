@@ -33,6 +33,8 @@ pub struct TrackRun {
     pub skipped: usize,
     /// Why the run stopped early, if it did.
     pub error: Option<String>,
+    /// The run stopped because the tracker refused the initial box.
+    pub init_failed: bool,
 }
 
 impl TrackRun {
@@ -115,6 +117,7 @@ where
             run.track_seconds += t0.elapsed().as_secs_f64();
             if let Err(e) = r {
                 run.error = Some(format!("init on frame {}: {e}", i + 1));
+                run.init_failed = true;
                 break;
             }
             run.frames_tracked += 1;

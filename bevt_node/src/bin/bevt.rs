@@ -329,16 +329,20 @@ fn eval(
     })
 }
 
+/// `--init x,y,w,h`: one finite box with positive size. Every bad box (unparsable, NaN,
+/// empty, negative, or refused by the tracker on the first frame) is a usage error:
+/// exit code 1 with the reason.
 fn parse_box(s: &str) -> Result<BBox> {
     let rows = parse_annotation(s, Path::new("--init")).with_context(|| format!("--init {s:?}"))?;
     match rows.as_slice() {
-        [Some(b)] => Ok(*b),
-        _ => bail!("--init {s:?}: expected one finite box x,y,w,h"),
+        [Some(b)] if b.is_finite() && b.w > 0.0 && b.h > 0.0 => Ok(*b),
+        _ => bail!("--init {s:?}: expected one finite box x,y,w,h with positive width and height"),
     }
 }
 
 fn track(cfg: &ConfigArgs, images: &Path, init: &str, out: Option<&Path>) -> Result<ExitCode> {
     let spec = spec_of(cfg)?;
+    let init_arg = init;
     let init = parse_box(init)?;
     let files = image_files(images)?;
     if files.is_empty() {
@@ -347,6 +351,12 @@ fn track(cfg: &ConfigArgs, images: &Path, init: &str, out: Option<&Path>) -> Res
     let pool = pool(spec.config.threads)?;
     let mut tracker = BevtTracker::new(spec);
     let run = pool.install(|| track_feed(&mut tracker, decode_ahead(files), 0, init, |_, _| {}));
+    if run.init_failed {
+        bail!(
+            "--init {init_arg:?}: {}",
+            run.error.as_deref().unwrap_or("refused by the tracker")
+        );
+    }
     let mut text = String::new();
     for b in &run.boxes {
         text.push_str(&format_annotation_row(b.as_ref()));
@@ -409,5 +419,52 @@ fn main() -> ExitCode {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run_track(init: &str) -> Result<ExitCode> {
+        let dir = std::env::temp_dir().join(format!("bevt_track_{}", std::process::id()));
+        std::fs::create_dir_all(&dir)?;
+        let seq = SynthParams::default();
+        for t in 0..3 {
+            let f = seq.frame(t);
+            image::RgbImage::from_raw(seq.width as u32, seq.height as u32, f.rgb)
+                .context("frame")?
+                .save(dir.join(format!("{t:04}.png")))?;
+        }
+        let cfg = ConfigArgs {
+            config: None,
+            set: Vec::new(),
+            threads: None,
+        };
+        let out = dir.join(format!("out_{}.txt", init.len()));
+        track(&cfg, &dir, init, Some(&out))
+    }
+
+    #[test]
+    fn every_bad_init_box_is_the_same_usage_error() {
+        // Unparsable, NaN, empty, negative, tiny and off-frame boxes alike.
+        for bad in [
+            "1,2,3",
+            "NaN,1,10,10",
+            "1,1,0,10",
+            "1,1,-10,10",
+            "1,1,10,-10",
+            "1,1,inf,10",
+            "10,10,2,2",
+            "-900,-900,20,20",
+            "5000,5000,20,20",
+        ] {
+            let e = run_track(bad).map(|_| ()).unwrap_err().to_string();
+            assert!(e.contains("--init"), "{bad}: {e}");
+        }
+        let seq = SynthParams::default();
+        let t = seq.truth(0);
+        let good = format!("{},{},{},{}", t.x + 1.0, t.y + 1.0, t.w, t.h);
+        assert_eq!(run_track(&good).unwrap(), ExitCode::SUCCESS);
     }
 }
