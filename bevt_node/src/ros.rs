@@ -58,7 +58,7 @@ const WORKER_WAIT: Duration = Duration::from_millis(10);
 const MAX_REQUESTS_PER_TURN: usize = 1000;
 /// History depth of the request and reply readers/writers of the services: a burst this
 /// large is read, and answered, without DDS dropping any of it.
-const SERVICE_HISTORY_DEPTH: usize = 1000;
+pub const SERVICE_HISTORY_DEPTH: usize = 1000;
 /// Admitted re-initialisation requests waiting for their turn, at most; admission (the
 /// token bucket) keeps far fewer than this.
 const MAX_PENDING_REQUESTS: usize = 64;
@@ -186,6 +186,14 @@ pub fn output_qos() -> QosProfile {
     QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast { depth: 10 })
 }
 
+/// The QoS of service requests and replies: reliable, keep last
+/// [`SERVICE_HISTORY_DEPTH`].
+pub fn service_qos() -> QosProfile {
+    QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast {
+        depth: SERVICE_HISTORY_DEPTH,
+    })
+}
+
 fn type_of<T: RosType>() -> MessageTypeName {
     MessageTypeName::new(T::PACKAGE, T::NAME)
 }
@@ -298,9 +306,7 @@ pub fn run(
     let pub_diag = node
         .create_publisher::<DiagnosticArray>(&t_diag, Some(oq.clone()))
         .map_err(create_err("diagnostics publisher"))?;
-    let sq = QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast {
-        depth: SERVICE_HISTORY_DEPTH,
-    });
+    let sq = service_qos();
     let srv_reinit = node
         .create_server::<ReinitRequest, ReinitResponse>(
             settings.service_mapping,

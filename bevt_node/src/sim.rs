@@ -2,7 +2,7 @@
 //! integration tests and the latency benchmark: the same code a real deployment's
 //! peers would run, with exact ground truth.
 
-use crate::ros::{camera_qos, context, output_qos, ros_name, RosError, RosSettings};
+use crate::ros::{camera_qos, context, output_qos, ros_name, service_qos, RosError, RosSettings};
 use bevt_core::eval::synth::SynthParams;
 use bevt_core::BBox;
 use bevt_msgs::bevt::{ReinitRequest, ReinitResponse, TrackStatus};
@@ -153,8 +153,8 @@ impl GroundStation {
                 settings.service_mapping,
                 &abs(crate::ros::names::REINIT)?,
                 &ServiceTypeName::new("bevt_msgs", "Reinit"),
-                sq.clone(),
-                sq.clone(),
+                service_qos(),
+                service_qos(),
             )
             .map_err(|e| RosError::Create {
                 what: "reinit client".into(),
@@ -219,6 +219,21 @@ impl GroundStation {
             }
         }
         None
+    }
+
+    /// Sends one `reinit` request without waiting (for bursts); false when it could not be
+    /// sent. Replies are read with [`Self::take_reinit_replies`].
+    pub fn send_reinit(&self, req: &ReinitRequest) -> bool {
+        self.client.send_request(req.clone()).is_ok()
+    }
+
+    /// `reinit` replies received so far (non-blocking).
+    pub fn take_reinit_replies(&self) -> Vec<ReinitResponse> {
+        let mut out = Vec::new();
+        while let Ok(Some((_, r))) = self.client.receive_response() {
+            out.push(r);
+        }
+        out
     }
 
     /// Track statuses received so far (non-blocking).

@@ -4,6 +4,7 @@
 mod bad_input;
 mod interop;
 mod node;
+mod node_limits;
 mod real_data;
 mod synthetic;
 mod tool;
