@@ -252,11 +252,13 @@ const MAX_SEARCH_AREA_SCALE: f32 = 10.0;
 /// Largest `window.padding` (ref 1.2).
 const MAX_PADDING: f32 = 3.0;
 /// Largest feature grid side, cells (ref 60).
-const MAX_GRID_SIDE: usize = 256;
+const MAX_GRID_SIDE: usize = 128;
 /// Largest patch side, pixels (ref 240).
-const MAX_PATCH_SIDE: usize = 1024;
-/// Most patch pixels sampled per frame over all scales (ref 5 · 240²).
-const MAX_PATCH_PIXELS: usize = 8 << 20;
+const MAX_PATCH_SIDE: usize = 512;
+/// Most patch pixels sampled per frame over all scales (ref 5 · 240² ≈ 0.29 M).
+const MAX_PATCH_PIXELS: usize = 2 << 20;
+/// Most ADMM iterations per training (ref 3); each costs FFTs of every channel.
+const MAX_ADMM_ITERATIONS: usize = 20;
 /// Largest `admm.mu_init`, `admm.lambda` and penalty-window value.
 const MAX_ADMM_VALUE: f32 = 1e6;
 /// Largest `admm.mu_max` (ref 1e4).
@@ -334,7 +336,7 @@ impl TrackerConfig {
                 "{} (grid side sqrt(filter_max_area) · padding = {grid_side} cells)",
                 w.filter_max_area
             ),
-            "sqrt(window.filter_max_area) · window.padding <= 256 cells",
+            "sqrt(window.filter_max_area) · window.padding <= 128 cells",
         )?;
         let patch_side = grid_side * f.hog_cell_size as f32;
         check(
@@ -344,7 +346,7 @@ impl TrackerConfig {
                 "{} (patch side grid side · hog_cell_size = {patch_side} px)",
                 f.hog_cell_size
             ),
-            "grid side (sqrt(window.filter_max_area) · window.padding) · features.hog_cell_size <= 1024 px",
+            "grid side (sqrt(window.filter_max_area) · window.padding) · features.hog_cell_size <= 512 px",
         )?;
         let patch_pixels = patch_side * patch_side * self.detection.number_of_scales as f32;
         check(
@@ -354,14 +356,14 @@ impl TrackerConfig {
                 "{} ({patch_pixels} patch pixels per frame)",
                 self.detection.number_of_scales
             ),
-            "number_of_scales · patch side² <= 8 M pixels per frame",
+            "number_of_scales · patch side² <= 2 M pixels per frame",
         )?;
         let a = &self.admm;
         check(
-            (1..=100).contains(&a.iterations),
+            (1..=MAX_ADMM_ITERATIONS).contains(&a.iterations),
             "admm.iterations",
             a.iterations,
-            "1..=100",
+            "1..=20",
         )?;
         check(
             finite_pos(a.mu_init) && a.mu_init <= MAX_ADMM_VALUE,
@@ -572,7 +574,7 @@ mod tests {
             .to_string()
             .contains("hog_cell_size"));
         let mut c = TrackerConfig::default();
-        c.window.filter_max_area = 16384.0;
+        c.window.filter_max_area = 6400.0;
         c.detection.number_of_scales = 33;
         assert!(c
             .validate()
@@ -582,11 +584,15 @@ mod tests {
         let mut c = TrackerConfig::default();
         c.detection.newton_iterations = 101;
         assert!(c.validate().is_err());
+        let mut c = TrackerConfig::default();
+        c.admm.iterations = 21;
+        assert!(c.validate().is_err());
         // The largest accepted values still validate.
         let mut c = TrackerConfig::default();
         c.window.search_area_scale = 10.0;
-        c.window.padding = 3.0;
+        c.window.padding = 2.0;
         c.detection.newton_iterations = 100;
+        c.admm.iterations = 20;
         c.validate().unwrap();
     }
 
