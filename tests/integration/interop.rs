@@ -20,7 +20,7 @@ const FRAMES: usize = 60;
 /// Camera rate of the peer.
 const RATE_HZ: f64 = 10.0;
 
-fn python() -> Result<PathBuf, String> {
+pub(crate) fn python() -> Result<PathBuf, String> {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/python-env.sh");
     let out = Command::new("bash")
         .arg(&script)

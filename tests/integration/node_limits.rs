@@ -469,3 +469,185 @@ fn hand_built_big_endian_cdr_decodes_as_the_node_reads_it() {
     assert_eq!(m.header.stamp.sec, 1_700_000_000);
     assert_eq!(m.data, vec![1, 2, 3, 4, 5, 6]);
 }
+
+/// Rounds of the bomb set sent by the independent peer.
+const PEER_ROUNDS: usize = 3;
+
+#[test]
+fn an_independent_cyclone_peer_sends_the_bomb_set_and_the_track_survives() {
+    use std::process::{Command, Stdio};
+    use std::sync::Mutex;
+    let py = match crate::interop::python() {
+        Ok(p) => p,
+        Err(e) => {
+            println!("SKIPPED an_independent_cyclone_peer_sends_the_bomb_set_and_the_track_survives: no Python environment ({e})");
+            return;
+        }
+    };
+    let dir = bevt_tests::temp_dir("bomb_peer");
+    let seq = SynthParams::default();
+    // The plan: each bomb followed by the next good frame.
+    let mut messages = Vec::new();
+    let mut expect: Vec<(String, Option<&'static str>, usize)> = Vec::new();
+    let (warm, t0) = image(&seq, 0);
+    std::fs::write(dir.join("frame_00000.rgb"), &warm.data).unwrap();
+    let mut k = 1;
+    for round in 0..PEER_ROUNDS {
+        for (i, (_, format, data, why)) in bombs(&warm).into_iter().enumerate() {
+            let file = format!("bomb_{round}_{i}.bin");
+            std::fs::write(dir.join(&file), &data).unwrap();
+            let id = format!("bomb-{round}-{i}");
+            messages.push(
+                serde_json::json!({"id": id, "kind": "compressed", "file": file, "format": format}),
+            );
+            expect.push((id, Some(why), 0));
+            let (m, _) = image(&seq, k);
+            let file = format!("frame_{k:05}.rgb");
+            std::fs::write(dir.join(&file), &m.data).unwrap();
+            let id = format!("good-{k}");
+            messages.push(serde_json::json!({"id": id, "kind": "raw", "file": file}));
+            expect.push((id, None, k));
+            k += 1;
+        }
+    }
+    let plan = serde_json::json!({
+        "width": seq.width, "height": seq.height, "warmup": "frame_00000.rgb", "messages": messages
+    });
+    std::fs::write(dir.join("plan.json"), plan.to_string()).unwrap();
+    // The node, recording every status it publishes.
+    let s = settings(3);
+    let seen: Arc<Mutex<Vec<TrackStatus>>> = Arc::default();
+    let stop = Arc::new(AtomicBool::new(false));
+    let core = NodeCore::new(
+        TrackerConfig::default().validate().unwrap(),
+        NodeSettings::default(),
+    );
+    let (s2, st2, seen2) = (s.clone(), stop.clone(), seen.clone());
+    let node = std::thread::spawn(move || {
+        run(core, &s2, st2, |o| {
+            if let Ok(mut v) = seen2.lock() {
+                v.push(o.status.clone());
+            }
+        })
+        .unwrap()
+    });
+    let gs = GroundStation::new(&s).unwrap();
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("interop/bomb_peer.py");
+    let mut peer = Command::new(&py)
+        .arg(&script)
+        .arg(s.domain_id.to_string())
+        .arg(&dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Initialise on the warm-up frame once the node has it (zero stamp = newest).
+    let end = Instant::now() + Duration::from_secs(30);
+    let resp = loop {
+        assert!(
+            Instant::now() < end,
+            "the peer's warm-up frames never arrived"
+        );
+        if seen
+            .lock()
+            .unwrap()
+            .iter()
+            .any(|st| st.header.frame_id == "warmup")
+        {
+            if let Some(r) = gs.reinit(
+                &reinit_request(t0, Time::default(), "warmup"),
+                Duration::from_secs(5),
+            ) {
+                break r;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert!(resp.success, "{}", resp.message);
+    std::thread::sleep(Duration::from_millis(500));
+    let steady = rss_kib();
+    std::fs::write(dir.join("go"), b"").unwrap();
+    let end = Instant::now() + Duration::from_secs(120);
+    let status = loop {
+        if let Some(st) = peer.try_wait().unwrap() {
+            break st;
+        }
+        if Instant::now() > end {
+            let _ = peer.kill();
+            panic!("the peer did not finish");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    std::thread::sleep(Duration::from_millis(500));
+    let after = rss_kib();
+    stop.store(true, Ordering::Relaxed);
+    let _ = node.join();
+    let out = peer.wait_with_output().unwrap();
+    assert!(
+        status.success(),
+        "peer failed ({status}): {}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let seen = seen.lock().unwrap().clone();
+    let track_id = resp_track_id(&seen);
+    let (mut bombs_seen, mut good_seen, mut last_good) = (0, 0, None);
+    for (id, why, frame) in &expect {
+        for st in seen.iter().filter(|st| &st.header.frame_id == id) {
+            match why {
+                Some(why) => {
+                    bombs_seen += 1;
+                    assert_eq!(st.state, TrackStatus::STATE_ERROR, "{id}: {}", st.reason);
+                    assert!(
+                        st.reason.to_lowercase().contains(why),
+                        "{id}: {}",
+                        st.reason
+                    );
+                }
+                None => {
+                    good_seen += 1;
+                    assert_eq!(st.state, TrackStatus::STATE_TRACKING, "{id}: {}", st.reason);
+                    assert_eq!(st.track_id, track_id, "{id}: the track was reset");
+                    let b = BBox::new(st.x, st.y, st.width, st.height);
+                    let truth = seq.truth(*frame);
+                    assert!(
+                        b.center().distance(&truth.center()) < 5.0,
+                        "{id}: {b:?} vs {truth:?}"
+                    );
+                    last_good = Some(*frame);
+                }
+            }
+        }
+    }
+    println!(
+        "bomb peer: {bombs_seen} bomb and {good_seen} good statuses of {} messages; VmRSS {} -> {} MiB",
+        expect.len(),
+        steady / 1024,
+        after / 1024
+    );
+    // Best effort on loopback: nearly everything arrives; most of it must have.
+    assert!(
+        bombs_seen * 2 >= expect.len() / 2,
+        "{bombs_seen} bomb statuses"
+    );
+    assert!(
+        good_seen * 2 >= expect.len() / 2,
+        "{good_seen} good statuses"
+    );
+    assert!(
+        last_good.is_some_and(|f| f + 2 >= k),
+        "tracking at the end: {last_good:?}"
+    );
+    assert!(
+        after <= 2 * steady + RSS_MARGIN_KIB,
+        "VmRSS grew from {steady} KiB to {after} KiB"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The track id of the first tracked status.
+fn resp_track_id(seen: &[TrackStatus]) -> u32 {
+    seen.iter()
+        .find(|s| s.state == TrackStatus::STATE_TRACKING)
+        .map_or(0, |s| s.track_id)
+}
