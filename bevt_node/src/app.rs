@@ -68,9 +68,9 @@ impl Default for NodeSettings {
             class_id: "target".into(),
             reinit_buffer_frames: 30,
             reinit_buffer_bytes: 256 << 20,
-            reinit_max_fast_forward: 10,
-            reinit_rate_hz: 2.0,
-            reinit_burst: 5,
+            reinit_max_fast_forward: 5,
+            reinit_rate_hz: 1.0,
+            reinit_burst: 3,
             image_limits: ImageLimits::default(),
             stale_timeout: Duration::from_secs(2),
             node_name: "bevt_node".into(),
@@ -1014,7 +1014,7 @@ mod tests {
         ));
         assert!(r.success, "{}", r.message);
         assert!(
-            r.message.contains("10 of the 25 newer frames"),
+            r.message.contains("5 of the 25 newer frames"),
             "{}",
             r.message
         );
@@ -1047,7 +1047,7 @@ mod tests {
         let refused = (0..200)
             .filter_map(|_| n.admit_reinit(t).err())
             .collect::<Vec<_>>();
-        assert_eq!(refused.len(), 195);
+        assert_eq!(refused.len(), 197);
         assert!(refused
             .iter()
             .all(|r| !r.success && r.message.contains("rate limit")));
