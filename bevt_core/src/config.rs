@@ -6,6 +6,7 @@
 //! is an enum, and its default is documented on the field.
 
 use crate::error::ConfigError;
+use crate::features::cnn_config::CnnConfig;
 use crate::filter::admm::{AdmmParams, PenaltyKind};
 use crate::verify::{ConsensusNorm, VerifyParams};
 use serde::{Deserialize, Serialize};
@@ -16,6 +17,8 @@ use serde::{Deserialize, Serialize};
 pub enum FeatureKind {
     /// Felzenszwalb HOG (31 channels), optionally + grayscale: the fast default.
     Hog,
+    /// CNN layers from an ONNX model (`features.cnn`, cargo feature `cnn`): the paper's mode.
+    Cnn,
 }
 
 /// Feature settings.
@@ -32,6 +35,8 @@ pub struct FeatureConfig {
     /// the data term against the ADMM penalty μ, and so the scale of the responses that
     /// consensus verification compares (1 = the reference).
     pub gain: f32,
+    /// CNN features (required when `kind` is `cnn`; see `config/cnn_*.yaml`).
+    pub cnn: Option<CnnConfig>,
 }
 
 impl Default for FeatureConfig {
@@ -41,6 +46,7 @@ impl Default for FeatureConfig {
             hog_cell_size: 4,
             grayscale: true,
             gain: 1.0,
+            cnn: None,
         }
     }
 }
@@ -291,6 +297,16 @@ impl TrackerConfig {
             f.gain,
             "(0, 1e4]",
         )?;
+        if f.kind == FeatureKind::Cnn {
+            f.cnn
+                .as_ref()
+                .ok_or_else(|| {
+                    ConfigError::Inconsistent(
+                        "features.kind is cnn but the features.cnn section is missing".to_string(),
+                    )
+                })?
+                .validate()?;
+        }
         let w = &self.window;
         // Work per frame grows with search_area_scale² (frame pixels read per scale).
         check(

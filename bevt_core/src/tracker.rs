@@ -3,7 +3,7 @@
 //! [`Tracker`] is the interface every driver uses (the ROS node, the `bevt` tool, tests);
 //! [`BevtTracker`] implements ALGORITHM.md §§1–7 on top of the stage modules.
 
-use crate::config::TrackerSpec;
+use crate::config::{FeatureKind, TrackerSpec};
 use crate::error::TrackError;
 use crate::features::{FeatureExtractor, FeatureMap, Hog};
 use crate::fft::{fftshift, Fft2};
@@ -157,7 +157,7 @@ impl ScaleWorker {
         let bins = fft.spectrum_len();
         let ch = extractor.channels();
         Self {
-            patch: Patch::new(g.patch_side, planes),
+            patch: Patch::new(extractor.input_side(g.patch_side), planes),
             feat: FeatureMap::new(g.grid, ch),
             extractor,
             fft,
@@ -184,13 +184,27 @@ impl ScaleWorker {
     ) -> Result<(), TrackError> {
         s.sample(center, region, &mut self.patch);
         self.extractor.extract(&self.patch, cell, &mut self.feat)?;
+        self.transform(window);
+        Ok(())
+    }
+
+    /// Windows `feat` and transforms it into `xf`.
+    fn transform(&mut self, window: &[f32]) {
         self.feat.apply_window(window);
         let bins = self.fft.spectrum_len();
         for d in 0..self.feat.channels {
             self.fft
                 .forward(self.feat.channel(d), &mut self.xf[d * bins..(d + 1) * bins]);
         }
-        Ok(())
+    }
+
+    /// Fused response of `xf` with filter `g_f`, and its sub-cell peak.
+    fn respond(&mut self, g_f: &[Complex32], layers: &[LayerSlot], newton: usize) {
+        let bins = self.fft.spectrum_len();
+        fused_response(g_f, &self.xf, layers, bins, &mut self.resp_f);
+        self.fft.inverse(&self.resp_f, &mut self.resp);
+        let grid = self.fft.grid();
+        self.peak = subpixel_peak(&self.resp, &self.resp_f, grid, newton, &mut self.newton);
     }
 
     /// Features, fused response with filter `g_f`, and its sub-cell peak.
@@ -207,13 +221,18 @@ impl ScaleWorker {
         newton: usize,
     ) -> Result<(), TrackError> {
         self.features(s, center, region, cell, window)?;
-        let bins = self.fft.spectrum_len();
-        fused_response(g_f, &self.xf, layers, bins, &mut self.resp_f);
-        self.fft.inverse(&self.resp_f, &mut self.resp);
-        let grid = self.fft.grid();
-        self.peak = subpixel_peak(&self.resp, &self.resp_f, grid, newton, &mut self.newton);
+        self.respond(g_f, layers, newton);
         Ok(())
     }
+}
+
+/// One feature pass for all scales (extractors with
+/// [`FeatureExtractor::single_pass_scales`]): the largest scale's patch and its extractor.
+struct SharedPass {
+    patch: Patch,
+    extractor: Box<dyn FeatureExtractor>,
+    /// Each scale's region as a fraction of the largest.
+    fractions: Vec<f32>,
 }
 
 /// Everything that exists only while tracking.
@@ -235,6 +254,9 @@ struct State {
     resp_f: Vec<Complex32>,
     resp: Vec<f32>,
     workers: Vec<ScaleWorker>,
+    shared: Option<SharedPass>,
+    /// Side of the sampled patches, pixels ([`FeatureExtractor::input_side`]).
+    input_side: usize,
     factors: Vec<f32>,
     /// `scale_penalty^|exponent|` per scale: multiplies each scale's peak before the
     /// arg-max (1 everywhere with the reference setting).
@@ -266,7 +288,7 @@ impl State {
     fn training_sample(&mut self, frame: &Frame<'_>) -> Result<(), TrackError> {
         let region = self.geo.patch_side as f32 * self.scale;
         self.sampler
-            .prepare(frame, self.pos, region, region, self.geo.patch_side);
+            .prepare(frame, self.pos, region, region, self.input_side);
         let w = &mut self.workers[0];
         w.features(&self.sampler, self.pos, region, self.geo.cell, &self.window)
     }
@@ -288,7 +310,8 @@ impl State {
 /// The BEVT tracker.
 pub struct BevtTracker {
     spec: TrackerSpec,
-    extractor: Box<dyn FeatureExtractor>,
+    /// Built by the constructor, or at the first `init` for extractors that load a model.
+    extractor: Option<Box<dyn FeatureExtractor>>,
     state: Option<Box<State>>,
 }
 
@@ -302,18 +325,57 @@ impl std::fmt::Debug for BevtTracker {
 }
 
 impl BevtTracker {
-    /// A tracker with the features `spec` names (HOG, optionally + grayscale).
+    /// A tracker with the features `spec` names. HOG is ready at once; CNN features load
+    /// their model at the first [`Tracker::init`], which reports any problem with it (use
+    /// [`Self::try_new`] to find out at construction).
     pub fn new(spec: TrackerSpec) -> Self {
-        let f = &spec.config.features;
-        let extractor = Box::new(Hog::new(f.hog_cell_size, f.grayscale));
-        Self::with_extractor(spec, extractor)
-    }
-
-    /// A tracker with a custom feature extractor (e.g. CNN features).
-    pub fn with_extractor(spec: TrackerSpec, extractor: Box<dyn FeatureExtractor>) -> Self {
+        let extractor = match spec.config.features.kind {
+            FeatureKind::Hog => Self::build_extractor(&spec).ok(),
+            FeatureKind::Cnn => None,
+        };
         Self {
             spec,
             extractor,
+            state: None,
+        }
+    }
+
+    /// A tracker with the features `spec` names, built now.
+    ///
+    /// # Errors
+    /// [`TrackError::Feature`] when the features cannot be built (for CNN: runtime, model,
+    /// outputs; or the `cnn` cargo feature is off).
+    pub fn try_new(spec: TrackerSpec) -> Result<Self, TrackError> {
+        let extractor = Self::build_extractor(&spec)?;
+        Ok(Self::with_extractor(spec, extractor))
+    }
+
+    /// The feature extractor `spec` names.
+    fn build_extractor(spec: &TrackerSpec) -> Result<Box<dyn FeatureExtractor>, TrackError> {
+        let f = &spec.config.features;
+        match f.kind {
+            FeatureKind::Hog => Ok(Box::new(Hog::new(f.hog_cell_size, f.grayscale))),
+            #[cfg(feature = "cnn")]
+            FeatureKind::Cnn => {
+                let c = f.cnn.as_ref().ok_or_else(|| {
+                    TrackError::Feature("features.kind is cnn but features.cnn is missing".into())
+                })?;
+                Ok(Box::new(crate::features::cnn::CnnExtractor::new(c)?))
+            }
+            #[cfg(not(feature = "cnn"))]
+            FeatureKind::Cnn => Err(TrackError::Feature(
+                "features.kind is cnn but bevt_core was built without the `cnn` cargo feature \
+                 (build with --features cnn)"
+                    .into(),
+            )),
+        }
+    }
+
+    /// A tracker with a custom feature extractor.
+    pub fn with_extractor(spec: TrackerSpec, extractor: Box<dyn FeatureExtractor>) -> Self {
+        Self {
+            spec,
+            extractor: Some(extractor),
             state: None,
         }
     }
@@ -374,10 +436,14 @@ impl BevtTracker {
         Ok(())
     }
 
-    fn build(&self, frame: &Frame<'_>, b: BBox) -> Result<Box<State>, TrackError> {
+    fn build(
+        &self,
+        ex: &dyn FeatureExtractor,
+        frame: &Frame<'_>,
+        b: BBox,
+    ) -> Result<Box<State>, TrackError> {
         let spec = &self.spec;
         let cfg = &spec.config;
-        let ex = &self.extractor;
         let geo = Geometry::new(spec, b.size(), ex.cell_size(), ex.allows_smaller_cells())?;
         let grid = geo.grid;
         let mut fft = Fft2::new(grid);
@@ -414,6 +480,15 @@ impl BevtTracker {
             .iter()
             .map(|_| ScaleWorker::new(&geo, ex.boxed_clone(), planes))
             .collect();
+        let input_side = ex.input_side(geo.patch_side);
+        let shared = ex.single_pass_scales().then(|| {
+            let fmax = factors.iter().copied().fold(f32::MIN_POSITIVE, f32::max);
+            SharedPass {
+                patch: Patch::new(input_side, planes),
+                extractor: ex.boxed_clone(),
+                fractions: factors.iter().map(|f| f / fmax).collect(),
+            }
+        });
         let (min_scale, max_scale) = scale_limits(
             geo.patch_side as f32,
             (frame.width() as f32, frame.height() as f32),
@@ -438,6 +513,8 @@ impl BevtTracker {
             resp_f: vec![Complex32::default(); bins],
             resp: vec![0.0; grid.len()],
             workers,
+            shared,
+            input_side,
             scale_weights: factors
                 .iter()
                 .map(|f| {
@@ -484,8 +561,22 @@ impl BevtTracker {
             window,
             g_f,
             layers,
+            shared,
             ..
         } = st;
+        if let Some(sp) = shared.as_mut() {
+            // One feature pass on the largest scale's region; every scale resampled from it.
+            let fmax = factors.iter().copied().fold(f32::MIN_POSITIVE, f32::max);
+            sampler.sample(pos, side * scale * fmax, &mut sp.patch);
+            let mut outs: Vec<&mut FeatureMap> = workers.iter_mut().map(|w| &mut w.feat).collect();
+            sp.extractor
+                .extract_scales(&sp.patch, &sp.fractions, &mut outs)?;
+            for w in workers.iter_mut() {
+                w.transform(window);
+                w.respond(g_f, layers, newton);
+            }
+            return Ok(());
+        }
         let (sampler, window, g_f, layers) = (&*sampler, &*window, &*g_f, &*layers);
         let run = |(w, f): (&mut ScaleWorker, &f32)| {
             w.detect(
@@ -516,7 +607,14 @@ impl Tracker for BevtTracker {
     fn init(&mut self, frame: &Frame<'_>, bbox: BBox) -> Result<(), TrackError> {
         self.state = None;
         Self::check_box(frame, bbox)?;
-        let mut st = self.build(frame, bbox)?;
+        if self.extractor.is_none() {
+            self.extractor = Some(Self::build_extractor(&self.spec)?);
+        }
+        let ex = self
+            .extractor
+            .as_deref()
+            .ok_or_else(|| TrackError::Feature("no feature extractor".into()))?;
+        let mut st = self.build(ex, frame, bbox)?;
         st.training_sample(frame)?;
         st.model_xf.copy_from_slice(&st.workers[0].xf);
         st.train();
@@ -547,7 +645,7 @@ impl Tracker for BevtTracker {
             st.pos,
             side * st.scale * fmin,
             side * st.scale * fmax * TRAIN_REUSE_MARGIN,
-            st.geo.patch_side,
+            st.input_side,
         );
         Self::detect_all(st, cfg.threads, cfg.detection.newton_iterations)?;
         let (best, _) =

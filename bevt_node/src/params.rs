@@ -61,6 +61,9 @@ pub fn load_config(path: Option<&Path>, overrides: &[String]) -> Result<TrackerS
     } else {
         serde_norway::from_str(&text).map_err(|e| parse_err(&origin, &e))?
     };
+    if let Some(dir) = path.and_then(Path::parent) {
+        resolve_cnn_paths(&mut value, dir);
+    }
     for o in overrides {
         let (key, raw) = o
             .split_once('=')
@@ -87,6 +90,29 @@ pub fn load_config(path: Option<&Path>, overrides: &[String]) -> Result<TrackerS
     }
     let cfg: TrackerConfig = serde_norway::from_value(value).map_err(|e| parse_err(&origin, &e))?;
     Ok(cfg.validate()?)
+}
+
+/// Makes the relative file paths of `features.cnn` (`model`, `runtime`) in a config file
+/// relative to the file's folder, so presets work from any working directory. Paths given by
+/// `--set` overrides stay relative to the working directory.
+fn resolve_cnn_paths(value: &mut serde_norway::Value, dir: &Path) {
+    let Some(cnn) = value
+        .get_mut("features")
+        .and_then(|f| f.get_mut("cnn"))
+        .and_then(|c| c.as_mapping_mut())
+    else {
+        return;
+    };
+    for key in ["model", "runtime"] {
+        if let Some(v) = cnn.get_mut(key) {
+            if let Some(p) = v
+                .as_str()
+                .filter(|p| !p.is_empty() && Path::new(p).is_relative())
+            {
+                *v = serde_norway::Value::String(dir.join(p).display().to_string());
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -119,6 +145,25 @@ mod tests {
         ));
         let e = load_config(None, &["features.hog_cell_size=1e20".into()]).unwrap_err();
         assert!(e.to_string().contains("features.hog_cell_size"), "{e}");
+    }
+
+    #[test]
+    fn cnn_paths_in_a_file_resolve_against_its_folder() {
+        let dir = std::env::temp_dir().join(format!("bevt_params_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("c.yaml");
+        std::fs::write(
+            &file,
+            "features:\n  kind: cnn\n  cnn:\n    model: ../m/x.onnx\n    runtime: /abs/lib.so\n",
+        )
+        .unwrap();
+        let s = load_config(Some(&file), &[]).unwrap();
+        let cnn = s.config.features.cnn.unwrap();
+        assert_eq!(Path::new(&cnn.model), dir.join("../m/x.onnx"));
+        assert_eq!(cnn.runtime, "/abs/lib.so");
+        let s = load_config(Some(&file), &["features.cnn.model=y.onnx".into()]).unwrap();
+        assert_eq!(s.config.features.cnn.unwrap().model, "y.onnx");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

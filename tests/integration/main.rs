@@ -2,6 +2,8 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // setup helpers outside #[test] fns
 
 mod bad_input;
+#[cfg(feature = "cnn")]
+mod cnn;
 mod interop;
 mod node;
 mod node_limits;

@@ -6,6 +6,9 @@
 //! gets its own correlation filter and its response is fused with the layer's weight
 //! (ALGORITHM.md §2).
 
+#[cfg(feature = "cnn")]
+pub mod cnn;
+pub mod cnn_config;
 pub mod gray;
 pub mod hog;
 
@@ -84,8 +87,40 @@ pub trait FeatureExtractor: Send {
         true
     }
 
-    /// Extracts features of `patch` (side `out.grid.w × cell` pixels) into `out`, whose grid
-    /// and channel count are preset by the caller.
+    /// Side of the patch this extractor wants for a search region of `patch_side` pixels
+    /// (`grid · cell`); the tracker samples the region straight to this size. Hand-crafted
+    /// features take the region as it is; a CNN may want its fixed input size.
+    fn input_side(&self, patch_side: usize) -> usize {
+        patch_side
+    }
+
+    /// Whether [`Self::extract_scales`] is supported: the tracker then extracts all scales of
+    /// a frame from one pass on the largest scale's patch.
+    fn single_pass_scales(&self) -> bool {
+        false
+    }
+
+    /// Features of several concentric regions from one pass on `patch` (the largest
+    /// region): `outs[k]` receives the map of the centred fraction `fractions[k]` (in
+    /// `(0, 1]`) of the patch, resampled to its grid.
+    ///
+    /// # Errors
+    /// [`TrackError::Feature`] when the backend fails or the extractor does not support it
+    /// (see [`Self::single_pass_scales`]).
+    fn extract_scales(
+        &mut self,
+        patch: &Patch,
+        fractions: &[f32],
+        outs: &mut [&mut FeatureMap],
+    ) -> Result<(), TrackError> {
+        let _ = (patch, fractions, outs);
+        Err(TrackError::Feature(
+            "this feature extractor has no single-pass multi-scale extraction".to_string(),
+        ))
+    }
+
+    /// Extracts features of `patch` (side [`Self::input_side`] of `out.grid.w × cell`
+    /// pixels) into `out`, whose grid and channel count are preset by the caller.
     ///
     /// # Errors
     /// [`TrackError::Feature`] when the backend fails.

@@ -1,0 +1,384 @@
+//! CNN features (cargo feature `cnn`): the feature path end to end on the tiny test models,
+//! the shipped models against their reference values, and every bad input as a clear error
+//! at init. Needs ONNX Runtime (`ORT_DYLIB_PATH`, see scripts/onnxruntime.sh): skipped with
+//! a printed reason without it.
+
+use bevt_core::config::FeatureKind;
+use bevt_core::eval::synth::SynthParams;
+use bevt_core::features::cnn::{CnnError, CnnExtractor, ORT_DYLIB_ENV};
+use bevt_core::features::cnn_config::{CnnConfig, CnnLayerConfig, InputSizePolicy, LayerNorm};
+use bevt_core::features::{FeatureExtractor, FeatureMap};
+use bevt_core::image::Patch;
+use bevt_core::{BevtTracker, Frame, GridSize, PixelFormat, TrackError, Tracker, TrackerConfig};
+use std::path::PathBuf;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn model(rel: &str) -> String {
+    repo().join("models").join(rel).display().to_string()
+}
+
+/// The runtime path, or `None` after printing why the test is skipped.
+fn runtime(test: &str) -> Option<String> {
+    match std::env::var(ORT_DYLIB_ENV) {
+        Ok(p) if std::path::Path::new(&p).is_file() => Some(p),
+        _ => {
+            println!("SKIPPED {test}: {ORT_DYLIB_ENV} does not name an ONNX Runtime library (run scripts/onnxruntime.sh)");
+            None
+        }
+    }
+}
+
+fn layer(output: &str, channels: usize, weight: f32) -> CnnLayerConfig {
+    CnnLayerConfig {
+        output: output.to_string(),
+        channels,
+        weight,
+        gain: 1.0,
+        norm: LayerNorm::Rms,
+    }
+}
+
+fn tiny(rt: &str) -> CnnConfig {
+    CnnConfig {
+        model: model("test/tiny_cnn.onnx"),
+        runtime: rt.to_string(),
+        input_size: 32,
+        cell_size: 4,
+        layers: vec![layer("s2", 4, 1.0), layer("s4", 6, 0.5)],
+        ..CnnConfig::default()
+    }
+}
+
+#[test]
+fn tiny_model_features_have_the_configured_layers_and_are_finite() {
+    let Some(rt) = runtime("tiny_model_features_have_the_configured_layers_and_are_finite") else {
+        return;
+    };
+    let mut ex = CnnExtractor::new(&tiny(&rt)).unwrap();
+    assert_eq!(ex.channels(), 10);
+    assert_eq!(ex.layers()[1].weight, 0.5);
+    assert_eq!(ex.input_side(40), 32);
+    let mut patch = Patch::new(32, 3);
+    for (i, v) in patch.data.iter_mut().enumerate() {
+        *v = ((i * 37) % 256) as f32;
+    }
+    let grid = GridSize { h: 8, w: 8 };
+    let mut out = FeatureMap::new(grid, 10);
+    ex.extract(&patch, 4, &mut out).unwrap();
+    assert!(out.data.iter().all(|v| v.is_finite()));
+    // RMS normalisation: each layer's raw map has RMS 1 after the gain of 1, and
+    // bilinear resampling keeps it of that order.
+    let n = grid.len();
+    for (range, name) in [(0..4, "s2"), (4..10, "s4")] {
+        let vals = &out.data[range.start * n..range.end * n];
+        let rms = (vals.iter().map(|v| v * v).sum::<f32>() / vals.len() as f32).sqrt();
+        assert!(rms > 0.3 && rms < 3.0, "{name}: rms {rms}");
+    }
+    // One pass for several scales equals separate resampling of the same pass at fraction 1.
+    let mut a = FeatureMap::new(grid, 10);
+    let mut b = FeatureMap::new(grid, 10);
+    ex.extract_scales(&patch, &[1.0, 0.5], &mut [&mut a, &mut b])
+        .unwrap();
+    assert_eq!(a.data, out.data);
+    assert_ne!(b.data, out.data);
+}
+
+#[test]
+fn tiny_model_tracks_a_synthetic_target_end_to_end() {
+    let Some(rt) = runtime("tiny_model_tracks_a_synthetic_target_end_to_end") else {
+        return;
+    };
+    let mut cfg = TrackerConfig::default();
+    cfg.features.kind = FeatureKind::Cnn;
+    cfg.features.cnn = Some(CnnConfig {
+        input_size_policy: InputSizePolicy::Patch,
+        ..tiny(&rt)
+    });
+    let seq = SynthParams {
+        frames: 8,
+        ..SynthParams::default()
+    };
+    let mut t = BevtTracker::try_new(cfg.validate().unwrap()).unwrap();
+    let f0 = seq.frame(0);
+    t.init(
+        &Frame::packed(&f0.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap(),
+        f0.truth,
+    )
+    .unwrap();
+    for i in 1..seq.frames {
+        let f = seq.frame(i);
+        let out = t
+            .update(&Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap())
+            .unwrap();
+        assert!(out.bbox.is_finite() && out.consensus > 0.0 && out.consensus <= 1.0);
+        // Random weights track poorly; the path must run and stay near the target.
+        let err = out.bbox.center().distance(&f.truth.center());
+        assert!(
+            err < seq.width as f32 / 2.0,
+            "frame {i}: centre error {err}"
+        );
+    }
+}
+
+/// Mean and first element of layer `l` after running `input`.
+fn stats(ex: &mut CnnExtractor, input: &[f32], side: usize, l: usize) -> (usize, usize, f64, f32) {
+    ex.run_raw(input, side).unwrap();
+    let (_, h, w, data) = ex.layer_map(l).unwrap();
+    let mean = data.iter().map(|v| f64::from(*v)).sum::<f64>() / data.len() as f64;
+    (h, w, mean, data[0])
+}
+
+#[test]
+fn shipped_nanotrack_backbone_matches_its_reference_values() {
+    let Some(rt) = runtime("shipped_nanotrack_backbone_matches_its_reference_values") else {
+        return;
+    };
+    let cfg = CnnConfig {
+        model: model("nanotrack/nanotrackv2_backbone_sim_dyn.onnx"),
+        runtime: rt,
+        ..CnnConfig::default()
+    };
+    let mut ex = CnnExtractor::new(&cfg).unwrap();
+    let side = 255;
+    let x: Vec<f32> = (0..3 * side * side)
+        .map(|i| ((i % 251) as f32 / 251.0) * 255.0)
+        .collect();
+    let (h, w, mean, first) = stats(&mut ex, &x, side, 0);
+    assert_eq!((h, w), (16, 16));
+    assert!((mean - -0.310945).abs() < 1e-4, "mean {mean}");
+    assert!((first - -5.593468).abs() < 1e-3, "first {first}");
+    // The top-left 127×127 crop of the same input.
+    let c = 127;
+    let crop: Vec<f32> = (0..3)
+        .flat_map(|p| (0..c).flat_map(move |r| (0..c).map(move |col| (p, r, col))))
+        .map(|(p, r, col)| x[(p * side + r) * side + col])
+        .collect();
+    let (h, w, mean, _) = stats(&mut ex, &crop, c, 0);
+    assert_eq!((h, w), (8, 8));
+    assert!((mean - -0.230320).abs() < 1e-4, "mean {mean}");
+}
+
+#[test]
+fn shipped_mobilenetv2_matches_its_reference_values() {
+    let Some(rt) = runtime("shipped_mobilenetv2_matches_its_reference_values") else {
+        return;
+    };
+    let names = [
+        ("feat_s4", 144, 0.174402, 0.210024),
+        ("feat_s8", 192, 0.109475, 0.331683),
+        ("feat_s16", 576, 0.023427, 0.0),
+        ("bneck_s4", 24, -0.096171, -0.385293),
+        ("bneck_s8", 32, -0.245705, 1.240075),
+        ("bneck_s16", 96, 0.027485, 0.328400),
+    ];
+    let cfg = CnnConfig {
+        model: model("mobilenetv2/mobilenetv2_features.onnx"),
+        runtime: rt,
+        input_size: 224,
+        layers: names.iter().map(|(n, c, _, _)| layer(n, *c, 1.0)).collect(),
+        ..CnnConfig::default()
+    };
+    let mut ex = CnnExtractor::new(&cfg).unwrap();
+    let side = 224;
+    let x: Vec<f32> = (0..3 * side * side)
+        .map(|i| ((i % 251) as f32 / 251.0 - 0.5) * 2.0)
+        .collect();
+    for (l, (name, _, mean_ref, first_ref)) in names.iter().enumerate() {
+        let (_, _, mean, first) = stats(&mut ex, &x, side, l);
+        assert!((mean - mean_ref).abs() < 1e-4, "{name}: mean {mean}");
+        assert!((first - first_ref).abs() < 1e-3, "{name}: first {first}");
+    }
+}
+
+/// The error `CnnExtractor::new` gives for `cfg`.
+fn init_error(cfg: &CnnConfig) -> CnnError {
+    CnnExtractor::new(cfg)
+        .err()
+        .expect("the config was accepted")
+}
+
+#[test]
+fn bad_models_and_configs_are_clear_errors_at_init() {
+    let Some(rt) = runtime("bad_models_and_configs_are_clear_errors_at_init") else {
+        return;
+    };
+    let base = tiny(&rt);
+    let e = init_error(&CnnConfig {
+        model: model("test/missing.onnx"),
+        ..base.clone()
+    });
+    assert!(matches!(e, CnnError::ModelMissing { .. }), "{e}");
+    assert!(e.to_string().contains("features.cnn.model"), "{e}");
+
+    let e = init_error(&CnnConfig {
+        layers: vec![layer("nope", 4, 1.0)],
+        ..base.clone()
+    });
+    assert!(matches!(e, CnnError::NoOutput { .. }), "{e}");
+    assert!(e.to_string().contains("s2, s4"), "{e}");
+
+    let e = init_error(&CnnConfig {
+        layers: vec![layer("s2", 5, 1.0)],
+        ..base.clone()
+    });
+    assert!(
+        matches!(
+            e,
+            CnnError::Channels {
+                got: 4,
+                expected: 5,
+                ..
+            }
+        ),
+        "{e}"
+    );
+
+    let e = init_error(&CnnConfig {
+        model: model("test/tiny_rank3.onnx"),
+        ..base.clone()
+    });
+    assert!(matches!(e, CnnError::Rank { .. }), "{e}");
+
+    let e = init_error(&CnnConfig {
+        model: model("test/tiny_fixed.onnx"),
+        input_size: 48,
+        ..base.clone()
+    });
+    assert!(matches!(e, CnnError::InputSize { size: 48, .. }), "{e}");
+    let e = init_error(&CnnConfig {
+        model: model("test/tiny_fixed.onnx"),
+        input_size_policy: InputSizePolicy::Patch,
+        ..base.clone()
+    });
+    assert!(matches!(e, CnnError::InputSize { .. }), "{e}");
+    // The fixed model at its own size is fine.
+    CnnExtractor::new(&CnnConfig {
+        model: model("test/tiny_fixed.onnx"),
+        ..base.clone()
+    })
+    .unwrap();
+
+    let e = init_error(&CnnConfig {
+        model: model("test/tiny_nan.onnx"),
+        ..base.clone()
+    });
+    assert!(matches!(e, CnnError::NonFinite { .. }), "{e}");
+
+    let e = init_error(&CnnConfig {
+        input: "image".to_string(),
+        ..base.clone()
+    });
+    assert!(matches!(e, CnnError::Input { .. }), "{e}");
+
+    // A model whose input size is wrong for the network (too small for two stride-2 convs
+    // is still fine; a non-ONNX file is not).
+    let e = init_error(&CnnConfig {
+        model: repo().join("models/test/README.md").display().to_string(),
+        ..base.clone()
+    });
+    assert!(matches!(e, CnnError::Model { .. }), "{e}");
+
+    let e = init_error(&CnnConfig {
+        runtime: "/nonexistent/libonnxruntime.so.1.31.1".to_string(),
+        ..base.clone()
+    });
+    assert!(matches!(e, CnnError::RuntimeMissing { .. }), "{e}");
+
+    #[cfg(not(feature = "cuda"))]
+    {
+        let e = init_error(&CnnConfig {
+            device: bevt_core::features::cnn_config::CnnDevice::Cuda,
+            ..base.clone()
+        });
+        assert!(matches!(e, CnnError::Device(_)), "{e}");
+    }
+}
+
+#[test]
+fn tracker_reports_a_bad_cnn_model_at_init_and_never_falls_back_to_hog() {
+    let Some(rt) = runtime("tracker_reports_a_bad_cnn_model_at_init_and_never_falls_back_to_hog")
+    else {
+        return;
+    };
+    let mut cfg = TrackerConfig::default();
+    cfg.features.kind = FeatureKind::Cnn;
+    cfg.features.cnn = Some(CnnConfig {
+        model: model("test/missing.onnx"),
+        ..tiny(&rt)
+    });
+    let spec = cfg.validate().unwrap();
+    assert!(matches!(
+        BevtTracker::try_new(spec.clone()),
+        Err(TrackError::Feature(_))
+    ));
+    let mut t = BevtTracker::new(spec);
+    let seq = SynthParams::default();
+    let f0 = seq.frame(0);
+    let e = t
+        .init(
+            &Frame::packed(&f0.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap(),
+            f0.truth,
+        )
+        .unwrap_err();
+    assert!(e.to_string().contains("features.cnn.model"), "{e}");
+    assert!(!t.is_initialized());
+}
+
+#[test]
+fn cnn_presets_parse_and_validate() {
+    for p in ["cnn_nanotrack", "cnn_mobilenetv2", "cnn_vgg19"] {
+        let path = repo().join("config").join(format!("{p}.yaml"));
+        let spec = bevt_node::params::load_config(Some(&path), &[]).unwrap();
+        let cnn = spec.config.features.cnn.unwrap();
+        assert_eq!(spec.config.features.kind, FeatureKind::Cnn);
+        if p != "cnn_vgg19" {
+            assert!(
+                std::path::Path::new(&cnn.model).is_file(),
+                "{p}: {} is not shipped",
+                cnn.model
+            );
+        }
+    }
+}
+
+/// Set in the child process of [`a_file_that_is_not_onnx_runtime_is_an_error_at_init`].
+const CHILD_ENV: &str = "BEVT_CNN_TEST_CHILD";
+
+/// ONNX Runtime is loaded once per process, so this runs in a fresh child process of the
+/// test binary, where no runtime is loaded yet.
+#[test]
+fn a_file_that_is_not_onnx_runtime_is_an_error_at_init() {
+    let not_a_runtime = repo().join("models/test/README.md").display().to_string();
+    if std::env::var(CHILD_ENV).is_ok() {
+        let e = init_error(&CnnConfig {
+            runtime: not_a_runtime,
+            ..tiny("")
+        });
+        assert!(matches!(e, CnnError::Runtime { .. }), "{e}");
+        assert!(e.to_string().contains("features.cnn.runtime"), "{e}");
+        println!("child: {e}");
+        return;
+    }
+    let out = std::process::Command::new(std::env::current_exe().unwrap())
+        .args([
+            "cnn::a_file_that_is_not_onnx_runtime_is_an_error_at_init",
+            "--exact",
+            "--nocapture",
+            "--test-threads=1",
+        ])
+        .env(CHILD_ENV, "1")
+        .env_remove(ORT_DYLIB_ENV)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("1 passed"), "{stdout}");
+    assert!(stdout.contains("child: features.cnn.runtime"), "{stdout}");
+}
