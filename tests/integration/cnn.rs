@@ -195,9 +195,7 @@ fn shipped_mobilenetv2_matches_its_reference_values() {
 
 /// The error `CnnExtractor::new` gives for `cfg`.
 fn init_error(cfg: &CnnConfig) -> CnnError {
-    CnnExtractor::new(cfg)
-        .err()
-        .expect("the config was accepted")
+    CnnExtractor::new(cfg).expect_err("the config was accepted")
 }
 
 #[test]
