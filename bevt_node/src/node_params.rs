@@ -5,7 +5,8 @@
 //! itself ignores).
 //!
 //! Parameters (see `config/node.yaml`, where each one's range is given): `domain_id`,
-//! `network_interfaces` (addresses; `[]` = all; default loopback only), `service_mapping`
+//! `network_interfaces` (IPv4 addresses the node listens and sends on; `["0.0.0.0"]` = all;
+//! `[]` is an error; default loopback only), `dds_max_sample_bytes`, `service_mapping`
 //! (`enhanced` | `cyclone`), `max_image_width`, `max_image_height`, `max_image_pixels`,
 //! `reinit_buffer_frames`, `reinit_buffer_mb`, `reinit_max_fast_forward`,
 //! `reinit_rate_hz`, `reinit_burst`, `stale_timeout_s`, `diagnostics_period_s`,
@@ -65,6 +66,8 @@ pub struct Launch {
 pub mod ranges {
     /// `max_image_width`, `max_image_height`: pixels (the core's frame side limit).
     pub const IMAGE_SIDE: (u64, u64) = (16, 32768);
+    /// `dds_max_sample_bytes`: bytes (64 KiB to 512 MiB).
+    pub const DDS_MAX_SAMPLE_BYTES: (u64, u64) = (64 << 10, 512 << 20);
     /// `max_image_pixels`: pixels (64 MP: 512 MiB of decoder output at most).
     pub const IMAGE_PIXELS: (u64, u64) = (256, 64 << 20);
     /// `reinit_buffer_frames`: frames.
@@ -287,9 +290,27 @@ pub fn launch_from_args(
                     .map(|a| {
                         a.as_str()
                             .and_then(|s| s.parse::<IpAddr>().ok())
-                            .ok_or_else(|| param_err(k, format!("{a:?} is not an IP address")))
+                            .filter(IpAddr::is_ipv4)
+                            .ok_or_else(|| param_err(k, format!("{a:?} is not an IPv4 address")))
                     })
                     .collect::<Result<_, _>>()?;
+                if ros_settings.networks.is_empty() {
+                    return Err(param_err(
+                        k,
+                        "empty: list the addresses to listen on (\"0.0.0.0\" = all interfaces)",
+                    ));
+                }
+                if ros_settings.networks.len() > 1
+                    && ros_settings.networks.iter().any(IpAddr::is_unspecified)
+                {
+                    return Err(param_err(
+                        k,
+                        "0.0.0.0 (all interfaces) cannot be combined with other addresses",
+                    ));
+                }
+            }
+            "dds_max_sample_bytes" => {
+                ros_settings.max_sample_bytes = int_in(k, v, ranges::DDS_MAX_SAMPLE_BYTES)? as usize
             }
             "service_mapping" => {
                 ros_settings.service_mapping = match v.as_str() {
@@ -370,6 +391,20 @@ pub fn launch_from_args(
                 node.reinit_buffer_bytes as u64 / MIB,
                 frame_bytes.div_ceil(MIB),
                 node.image_limits.max_pixels
+            ),
+        ));
+    }
+    // One largest raw image message must fit a DDS sample.
+    let message_bytes = frame_bytes.saturating_add(crate::ros::SAMPLE_OVERHEAD_BYTES as u64);
+    if (ros_settings.max_sample_bytes as u64) < message_bytes {
+        return Err(param_err(
+            "dds_max_sample_bytes",
+            format!(
+                "{} bytes cannot hold one largest image message ({message_bytes} = 4 bytes × \
+                 max_image_pixels {} + {} KiB)",
+                ros_settings.max_sample_bytes,
+                node.image_limits.max_pixels,
+                crate::ros::SAMPLE_OVERHEAD_BYTES / 1024
             ),
         ));
     }
@@ -546,5 +581,39 @@ mod tests {
         .unwrap();
         assert_eq!(l.node.reinit_rate_hz, 0.5);
         assert_eq!(l.node.stale_timeout, Duration::from_secs(3600));
+    }
+
+    #[test]
+    fn network_interfaces_and_max_sample_size_are_checked() {
+        let none = |_: &str| None;
+        for a in [
+            "--ros-args -p network_interfaces:=[]",
+            "--ros-args -p network_interfaces:=[::1]",
+            "--ros-args -p network_interfaces:=[0.0.0.0,127.0.0.1]",
+        ] {
+            let e = launch_from_args(&args(a), none).unwrap_err().to_string();
+            assert!(e.contains("network_interfaces"), "{a}: {e}");
+        }
+        for a in [
+            "--ros-args -p dds_max_sample_bytes:=1000",
+            "--ros-args -p dds_max_sample_bytes:=1099511627776",
+            // Smaller than one largest image message.
+            "--ros-args -p dds_max_sample_bytes:=67108864",
+        ] {
+            let e = launch_from_args(&args(a), none).unwrap_err().to_string();
+            assert!(e.contains("dds_max_sample_bytes"), "{a}: {e}");
+        }
+        let l = launch_from_args(
+            &args(
+                "--ros-args -p network_interfaces:=[0.0.0.0] -p dds_max_sample_bytes:=1048576 -p max_image_pixels:=65536",
+            ),
+            none,
+        )
+        .unwrap();
+        assert_eq!(l.ros.networks, vec![IpAddr::from([0, 0, 0, 0])]);
+        assert_eq!(l.ros.max_sample_bytes, 1 << 20);
+        let l = launch_from_args(&[], none).unwrap();
+        assert_eq!(l.ros.networks, vec![IpAddr::from([127, 0, 0, 1])]);
+        assert_eq!(l.ros.max_sample_bytes, crate::ros::DEFAULT_MAX_SAMPLE_BYTES);
     }
 }

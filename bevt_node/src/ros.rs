@@ -19,7 +19,7 @@ use bevt_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 use bevt_msgs::vision_msgs::{Detection2D, Detection2DArray};
 use bevt_msgs::RosType;
 use futures::StreamExt;
-use ros2_client::dds::rustdds::DomainParticipantBuilder;
+use ros2_client::dds::rustdds::{DomainParticipantBuilder, FragmentLimits};
 use ros2_client::{
     Context, MessageTypeName, Name, Node, NodeName, NodeOptions, QosProfile, ServiceMapping,
     ServiceTypeName,
@@ -80,6 +80,13 @@ enum PendingReinit {
     Topic(ReinitRequest),
 }
 
+/// Room for an image message's fields besides its pixels (header, strings), bytes.
+pub const SAMPLE_OVERHEAD_BYTES: usize = 64 * 1024;
+
+/// Default [`RosSettings::max_sample_bytes`]: a 4096×4096 rgba8 image (16 MP, 64 MiB)
+/// plus [`SAMPLE_OVERHEAD_BYTES`].
+pub const DEFAULT_MAX_SAMPLE_BYTES: usize = 4096 * 4096 * 4 + SAMPLE_OVERHEAD_BYTES;
+
 /// Errors of the ROS layer.
 #[derive(Debug, Error)]
 #[non_exhaustive]
@@ -106,8 +113,12 @@ pub struct RosSettings {
     pub namespace: String,
     /// DDS domain.
     pub domain_id: u16,
-    /// Network interfaces (addresses) DDS may use; empty = all. Default loopback only.
+    /// Network interfaces (IPv4 addresses) DDS listens and sends on; `0.0.0.0` = all
+    /// interfaces; empty is an error. Default loopback only.
     pub networks: Vec<IpAddr>,
+    /// Largest DDS sample (serialized message, bytes) the node reassembles from
+    /// fragments: at least the largest image message it accepts.
+    pub max_sample_bytes: usize,
     /// Service wire mapping: `Enhanced` for Fast DDS peers, `Cyclone` for rmw_cyclonedds.
     pub service_mapping: ServiceMapping,
     /// Name remappings `from → to` (exact match on the names in [`names`]).
@@ -125,6 +136,7 @@ impl Default for RosSettings {
             namespace: "/".into(),
             domain_id: 0,
             networks: vec![IpAddr::from([127, 0, 0, 1])],
+            max_sample_bytes: DEFAULT_MAX_SAMPLE_BYTES,
             service_mapping: ServiceMapping::Enhanced,
             remaps: Vec::new(),
             diagnostics_period: Duration::from_secs(1),
@@ -152,12 +164,21 @@ pub fn ros_name(settings: &RosSettings, name: &str) -> Result<Name, RosError> {
         .map_err(|e| RosError::Name(name.to_string(), format!("{e:?}")))
 }
 
-/// A DDS context restricted to `settings.networks` (all interfaces when empty).
+/// A DDS context that listens and sends only on `settings.networks` (`0.0.0.0`: all
+/// interfaces) and reassembles samples of at most `settings.max_sample_bytes`.
 pub fn context(settings: &RosSettings) -> Result<Context, RosError> {
-    let mut b = DomainParticipantBuilder::new(settings.domain_id);
-    if !settings.networks.is_empty() {
-        b = b.with_only_networks(settings.networks.clone());
+    if settings.networks.is_empty() {
+        return Err(RosError::Create {
+            what: format!("DDS participant on domain {}", settings.domain_id),
+            reason: "no network interfaces: list the addresses to listen on (0.0.0.0 = all)".into(),
+        });
     }
+    // Discovery samples are small: RustDDS's built-in limits stay.
+    let b = DomainParticipantBuilder::new(settings.domain_id)
+        .with_only_networks(settings.networks.clone())
+        .fragment_limits(FragmentLimits::with_max_sample_size(
+            settings.max_sample_bytes,
+        ));
     let dp = b.build().map_err(|e| RosError::Create {
         what: format!("DDS participant on domain {}", settings.domain_id),
         reason: format!("{e:?}"),

@@ -4,6 +4,7 @@
 mod bad_input;
 #[cfg(feature = "cnn")]
 mod cnn;
+mod dds_hardening;
 mod interop;
 mod node;
 mod node_limits;

@@ -224,6 +224,8 @@ pub use dds::{
   typedesc::TypeDesc,
   with_key::{datareader::SelectByKey, WriteOptions, WriteOptionsBuilder},
 };
+#[doc(inline)]
+pub use rtps::fragment_assembler::FragmentLimits;
 /// Needed to specify serialized data representation in case it is other than
 /// CDR.
 pub use serialization::RepresentationIdentifier;

@@ -21,7 +21,7 @@ use futures::stream::{FusedStream, Stream};
 use log::{debug, error, info, trace, warn};
 
 use crate::{
-  create_error_out_of_resources, create_error_poisoned,
+  create_error_bad_parameter, create_error_out_of_resources, create_error_poisoned,
   dds::{
     pubsub::*,
     qos::*,
@@ -45,6 +45,7 @@ use crate::{
   rtps::{
     constant::*,
     dp_event_loop::{DPEventLoop, DomainInfo, EventLoopCommand},
+    fragment_assembler::FragmentLimits,
     reader::*,
     writer::WriterIngredients,
   },
@@ -78,6 +79,8 @@ pub struct DomainParticipantBuilder {
 
   same_host_loopback: bool, // prefer loopback for same-host peers + localhost SPDP discovery peers
 
+  fragment_limits: FragmentLimits,
+
   socket_receive_buffer_size: usize,
   socket_send_buffer_size: usize,
 
@@ -93,6 +96,7 @@ impl DomainParticipantBuilder {
       domain_id,
       only_networks: None,
       same_host_loopback: true,
+      fragment_limits: FragmentLimits::default(),
       socket_receive_buffer_size: Self::DEFAULT_SOCKET_RECEIVE_BUFFER_SIZE,
       socket_send_buffer_size: Self::DEFAULT_SOCKET_SEND_BUFFER_SIZE,
       #[cfg(feature = "security")]
@@ -102,14 +106,19 @@ impl DomainParticipantBuilder {
     }
   }
 
-  /// Filter which local network interfaces are used for multicast and
-  /// advertised in discovery.
+  /// Restrict the participant to the local network interfaces with these
+  /// (IPv4) addresses.
   ///
   /// When set, only interfaces whose IP address appears in `addrs` are used for
-  /// multicast joins, multicast sends, and unicast locator advertisement.
-  ///
-  /// This is not a hard transport-level ACL: unicast sockets still bind to
-  /// wildcard addresses for the selected ports.
+  /// multicast joins, multicast sends, and unicast locator advertisement, and
+  /// the participant only listens there: unicast receive sockets are bound to
+  /// each address (not to the wildcard address), the unicast send socket is
+  /// bound to the address when there is only one, and a multicast receive
+  /// socket is bound to the multicast group, joined only on these interfaces
+  /// (and, on Linux, receives only the groups it joined itself), and not opened
+  /// at all when none of them can join it (e.g. loopback only).
+  /// `0.0.0.0` in `addrs` means all interfaces (the wildcard binding of the
+  /// default). Building fails when `addrs` has no IPv4 address.
   pub fn with_only_networks(mut self, addrs: impl IntoIterator<Item = impl Into<IpAddr>>) -> Self {
     self.only_networks = Some(addrs.into_iter().map(Into::into).collect());
     self
@@ -126,6 +135,14 @@ impl DomainParticipantBuilder {
   /// `src/rtps/loopback_same_host_design.md`.
   pub fn same_host_loopback(mut self, enabled: bool) -> Self {
     self.same_host_loopback = enabled;
+    self
+  }
+
+  /// Limits on reassembling fragmented samples (DATA_FRAG): largest sample,
+  /// incomplete samples and bytes per reader, timeout. See
+  /// [`FragmentLimits`]; the default caps samples at 256 MiB.
+  pub fn fragment_limits(mut self, limits: FragmentLimits) -> Self {
+    self.fragment_limits = limits;
     self
   }
 
@@ -344,6 +361,7 @@ impl DomainParticipantBuilder {
       self.socket_send_buffer_size,
       self.only_networks,
       self.same_host_loopback,
+      self.fragment_limits,
       dp_waker,
       discovery_sample_sender,
     )?;
@@ -977,6 +995,7 @@ impl DomainParticipantDisc {
     socket_send_buffer_size: usize,
     only_networks: Option<Vec<IpAddr>>,
     same_host_loopback: bool,
+    fragment_limits: FragmentLimits,
     dp_waker: LoopWaker,
     discovery_sample_sender: ReadySender<mio1::Token>,
   ) -> CreateResult<Self> {
@@ -994,6 +1013,7 @@ impl DomainParticipantDisc {
       socket_send_buffer_size,
       only_networks,
       same_host_loopback,
+      fragment_limits,
       dp_waker,
       discovery_sample_sender,
     )?;
@@ -1236,25 +1256,75 @@ impl DomainParticipantInner {
     socket_send_buffer_size: usize,
     only_networks: Option<Vec<IpAddr>>,
     same_host_loopback: bool,
+    fragment_limits: FragmentLimits,
     dp_waker: LoopWaker,
     discovery_sample_sender: ReadySender<mio1::Token>,
   ) -> CreateResult<Self> {
     #[cfg(not(feature = "security"))]
     let _dummy = _qos_policies; // to make clippy happy
 
-    let only_networks: Option<Arc<[IpAddr]>> = only_networks.map(|v| v.into());
+    // 0.0.0.0 among the networks means all of them: the default.
+    let only_networks: Option<Arc<[IpAddr]>> = only_networks
+      .filter(|v| !v.contains(&IpAddr::V4(Ipv4Addr::UNSPECIFIED)))
+      .map(|v| v.into());
 
-    let mut listeners = HashMap::new();
+    // Where the unicast receive sockets listen: the wildcard address by
+    // default, else each selected IPv4 address (the transport is IPv4).
+    let listen_addrs: Vec<Ipv4Addr> = match only_networks.as_deref() {
+      None => vec![Ipv4Addr::UNSPECIFIED],
+      Some(nets) => {
+        let mut v4: Vec<Ipv4Addr> = nets
+          .iter()
+          .filter_map(|a| match a {
+            IpAddr::V4(a) => Some(*a),
+            IpAddr::V6(_) => None,
+          })
+          .collect();
+        v4.sort_unstable();
+        v4.dedup();
+        if v4.is_empty() {
+          return create_error_bad_parameter!(
+            "only_networks {nets:?} has no IPv4 address to listen on"
+          );
+        }
+        v4
+      }
+    };
+    // A multicast receive socket bound to the group receives only that group,
+    // not unicast to its port; Windows cannot bind to a multicast address.
+    let multicast_host = if only_networks.is_some() && cfg!(not(windows)) {
+      "239.255.0.1"
+    } else {
+      "0.0.0.0"
+    };
+    // One unicast listener per listen address, all on one port (`port` 0: the
+    // one the OS picks for the first).
+    let bind_unicast = |port: u16| -> io::Result<Vec<UDPListener>> {
+      let mut port = port;
+      let mut bound = Vec::with_capacity(listen_addrs.len());
+      for addr in &listen_addrs {
+        let l = UDPListener::new_unicast_with_buf_size(
+          &addr.to_string(),
+          port,
+          socket_receive_buffer_size,
+        )?;
+        port = l.local_port()?;
+        bound.push(l);
+      }
+      Ok(bound)
+    };
+
+    let mut listeners: HashMap<mio1::Token, Vec<UDPListener>> = HashMap::new();
 
     match UDPListener::new_multicast_with_buf_size(
-      "0.0.0.0",
+      multicast_host,
       spdp_well_known_multicast_port(domain_id),
       Ipv4Addr::new(239, 255, 0, 1),
       socket_receive_buffer_size,
       only_networks.as_deref(),
     ) {
       Ok(l) => {
-        listeners.insert(DISCOVERY_MUL_LISTENER_TOKEN, l);
+        listeners.insert(DISCOVERY_MUL_LISTENER_TOKEN, vec![l]);
       }
       Err(e) => warn!("Cannot get multicast discovery listener: {e:?}"),
     }
@@ -1266,12 +1336,8 @@ impl DomainParticipantInner {
     // Magic value 120 below is from RTPS spec 2.5 Section "9.6.2.3 Default Port
     // Numbers"
     while discovery_listener.is_none() && participant_id < 120 {
-      discovery_listener = UDPListener::new_unicast_with_buf_size(
-        "0.0.0.0",
-        spdp_well_known_unicast_port(domain_id, participant_id),
-        socket_receive_buffer_size,
-      )
-      .ok();
+      discovery_listener =
+        bind_unicast(spdp_well_known_unicast_port(domain_id, participant_id)).ok();
       if discovery_listener.is_none() {
         participant_id += 1;
       }
@@ -1289,45 +1355,41 @@ impl DomainParticipantInner {
     // Now the user traffic listeners
 
     match UDPListener::new_multicast_with_buf_size(
-      "0.0.0.0",
+      multicast_host,
       user_traffic_multicast_port(domain_id),
       Ipv4Addr::new(239, 255, 0, 1),
       socket_receive_buffer_size,
       only_networks.as_deref(),
     ) {
       Ok(l) => {
-        listeners.insert(USER_TRAFFIC_MUL_LISTENER_TOKEN, l);
+        listeners.insert(USER_TRAFFIC_MUL_LISTENER_TOKEN, vec![l]);
       }
       Err(e) => warn!("Cannot get multicast user traffic listener: {e:?}"),
     }
 
-    let user_traffic_listener = UDPListener::new_unicast_with_buf_size(
-      "0.0.0.0",
-      user_traffic_unicast_port(domain_id, participant_id),
-      socket_receive_buffer_size,
-    )
-    .or_else(|e| {
-      if matches!(e.kind(), ErrorKind::AddrInUse) {
-        // If we do not get the preferred listening port,
-        // try again, with "any" port number.
-        UDPListener::new_unicast_with_buf_size("0.0.0.0", 0, socket_receive_buffer_size).or_else(
-          |e| {
+    let user_traffic_listener = bind_unicast(user_traffic_unicast_port(domain_id, participant_id))
+      .or_else(|e| {
+        if matches!(e.kind(), ErrorKind::AddrInUse) {
+          // If we do not get the preferred listening port,
+          // try again, with "any" port number.
+          bind_unicast(0).or_else(|e| {
             create_error_out_of_resources!(
               "Could not open unicast user traffic listener, any port number: {:?}",
               e
             )
-          },
-        )
-      } else {
-        create_error_out_of_resources!("Could not open unicast user traffic listener: {e:?}")
-      }
-    })?;
+          })
+        } else {
+          create_error_out_of_resources!("Could not open unicast user traffic listener: {e:?}")
+        }
+      })?;
 
     listeners.insert(USER_TRAFFIC_LISTENER_TOKEN, user_traffic_listener);
 
-    // construct our own Locators
+    // construct our own Locators (the listeners of a token share one port, and
+    // each advertises all selected interfaces)
     let self_locators: HashMap<mio1::Token, Vec<Locator>> = listeners
       .iter()
+      .filter_map(|(t, ls)| ls.first().map(|l| (t, l)))
       .map(
         |(t, l)| match l.to_locator_address(only_networks.as_deref()) {
           Ok(locs) => (*t, locs),
@@ -1412,6 +1474,7 @@ impl DomainParticipantInner {
           only_networks_for_ev_loop,
           socket_send_buffer_size,
           same_host_loopback,
+          fragment_limits,
           reader_ready_rx,
           writer_ready_rx,
           dp_waker,

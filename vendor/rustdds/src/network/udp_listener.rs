@@ -76,8 +76,20 @@ impl UDPListener {
     port: u16,
     reuse_addr: bool,
     recv_buffer_size: usize,
+    only_joined_groups: bool,
   ) -> io::Result<mio1::net::UdpSocket> {
     let raw_socket = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP))?;
+
+    // Linux delivers a multicast datagram to every socket bound to its group
+    // and port if *any* socket on the host joined the group on the interface
+    // it arrived on (IP_MULTICAST_ALL, on by default). Receive only the
+    // memberships this socket joined itself.
+    #[cfg(target_os = "linux")]
+    if only_joined_groups {
+      raw_socket.set_multicast_all_v4(false)?;
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = only_joined_groups;
 
     if recv_buffer_size > 0 {
       raw_socket
@@ -189,7 +201,7 @@ impl UDPListener {
     port: u16,
     recv_buffer_size: usize,
   ) -> io::Result<Self> {
-    let mio_socket = Self::new_listening_socket(host, port, false, recv_buffer_size)?;
+    let mio_socket = Self::new_listening_socket(host, port, false, recv_buffer_size, false)?;
 
     Ok(Self {
       socket: mio_socket,
@@ -205,6 +217,9 @@ impl UDPListener {
     Self::new_multicast_with_buf_size(host, port, multicast_group, 0, None)
   }
 
+  /// A multicast listener. With `only_networks`, it joins the group only on
+  /// those interfaces, receives only its own memberships (Linux), and is an
+  /// error when no join succeeds, so that nothing listens on the port then.
   pub fn new_multicast_with_buf_size(
     host: &str,
     port: u16,
@@ -216,7 +231,8 @@ impl UDPListener {
       return io::Result::Err(io::Error::other("Not a multicast address"));
     }
 
-    let mio_socket = Self::new_listening_socket(host, port, true, recv_buffer_size)?;
+    let mio_socket =
+      Self::new_listening_socket(host, port, true, recv_buffer_size, only_networks.is_some())?;
     let mut joined_multicast = false;
 
     for multicast_if_ipaddr in get_local_multicast_ip_addrs_filtered(only_networks)? {
@@ -250,6 +266,15 @@ impl UDPListener {
     }
 
     if !joined_multicast {
+      if only_networks.is_some() {
+        info!(
+          "No multicast join succeeded for group {multicast_group:?} on {only_networks:?}; not \
+           listening to multicast."
+        );
+        return Err(io::Error::other(
+          "no multicast join on the selected interfaces",
+        ));
+      }
       warn!(
         "No multicast joins succeeded for group {multicast_group:?}; multicast locator will not \
          be advertised."
@@ -263,6 +288,11 @@ impl UDPListener {
       has_multicast_join: joined_multicast,
       ifindex_map: build_ifindex_to_interface_map(),
     })
+  }
+
+  /// The local port the socket is bound to.
+  pub fn local_port(&self) -> io::Result<u16> {
+    Ok(self.socket.local_addr()?.port())
   }
 
   pub fn mio_socket(&mut self) -> &mut mio1::net::UdpSocket {

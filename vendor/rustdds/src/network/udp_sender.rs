@@ -76,8 +76,16 @@ impl UDPSender {
     only_networks: Option<&[IpAddr]>,
     send_buffer_size: usize,
   ) -> io::Result<Self> {
+    // Bound to the selected address when there is exactly one, so that no
+    // socket of a restricted participant listens on all interfaces (this one
+    // is never read, but the kernel would queue datagrams sent to it). With
+    // several, the source address must follow the route: the wildcard.
+    let unicast_bind_addr: IpAddr = match only_networks {
+      Some([a @ IpAddr::V4(_)]) => *a,
+      _ => IpAddr::V4(std::net::Ipv4Addr::UNSPECIFIED),
+    };
     let unicast_socket = {
-      let saddr: SocketAddr = SocketAddr::new("0.0.0.0".parse().unwrap(), sender_port);
+      let saddr: SocketAddr = SocketAddr::new(unicast_bind_addr, sender_port);
       let raw_socket = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP))?;
       Self::set_and_verify_send_buffer(&raw_socket, send_buffer_size);
       raw_socket.bind(&SockAddr::from(saddr))?;

@@ -36,6 +36,7 @@ use crate::{
   //qos::HasQoSPolicy,
   rtps::{
     constant::*,
+    fragment_assembler::FragmentLimits,
     message_receiver::MessageReceiver,
     outbound::SocketId,
     reader::{Reader, ReaderIngredients},
@@ -80,7 +81,7 @@ pub struct DPEventLoop {
   poll: Poll,
   dds_cache: Arc<RwLock<DDSCache>>,
   discovery_db: Arc<RwLock<DiscoveryDB>>,
-  udp_listeners: HashMap<Token, UDPListener>,
+  udp_listeners: HashMap<Token, Vec<UDPListener>>,
   message_receiver: MessageReceiver, // This contains our Readers
 
   // If security is enabled, this contains the security plugins
@@ -140,6 +141,9 @@ pub struct DPEventLoop {
   // route same-host peers over loopback. See
   // `src/rtps/loopback_same_host_design.md`.
   same_host_loopback: bool,
+
+  // Limits on reassembling fragmented samples, given to every local reader.
+  fragment_limits: FragmentLimits,
 }
 
 impl DPEventLoop {
@@ -148,7 +152,7 @@ impl DPEventLoop {
   pub(crate) fn new(
     domain_info: DomainInfo,
     dds_cache: Arc<RwLock<DDSCache>>,
-    udp_listeners: HashMap<Token, UDPListener>,
+    udp_listeners: HashMap<Token, Vec<UDPListener>>,
     discovery_db: Arc<RwLock<DiscoveryDB>>,
     participant_guid_prefix: GuidPrefix,
     add_reader_receiver: TokenReceiverPair<ReaderIngredients>,
@@ -164,6 +168,7 @@ impl DPEventLoop {
     only_networks: Option<Arc<[IpAddr]>>,
     socket_send_buffer_size: usize,
     same_host_loopback: bool,
+    fragment_limits: FragmentLimits,
     reader_ready: ReadyReceiver<EntityId>,
     writer_ready: ReadyReceiver<EntityId>,
     waker: LoopWaker,
@@ -185,7 +190,10 @@ impl DPEventLoop {
     // Listeners are edge-triggered. The loop reads each one until WouldBlock,
     // so a datagram left in the socket cannot sit unreported.
     let mut udp_listeners = udp_listeners;
-    for (token, listener) in &mut udp_listeners {
+    for (token, listener) in udp_listeners
+      .iter_mut()
+      .flat_map(|(t, ls)| ls.iter_mut().map(move |l| (t, l)))
+    {
       try_init!(
         poll
           .registry()
@@ -257,6 +265,7 @@ impl DPEventLoop {
       participant_status_sender,
       discovery_command_sender,
       same_host_loopback,
+      fragment_limits,
     })
   }
 
@@ -331,12 +340,17 @@ impl DPEventLoop {
               | USER_TRAFFIC_MUL_LISTENER_TOKEN => {
                 // Edge-triggered: read until WouldBlock. A cap would leave
                 // datagrams sitting with no further readiness event.
+                // A token may have several sockets (one per listen address).
                 let udp_messages = ev_wrapper.udp_listeners.get_mut(&token).map_or_else(
                   || {
                     error!("No listener with token {:?}", token);
                     vec![]
                   },
-                  |l| l.messages_bounded(usize::MAX),
+                  |ls| {
+                    ls.iter_mut()
+                      .flat_map(|l| l.messages_bounded(usize::MAX))
+                      .collect()
+                  },
                 );
                 for (packet, origin) in udp_messages {
                   ev_wrapper
@@ -1069,6 +1083,7 @@ impl DPEventLoop {
     // Reader commands share the poll waker. The ready queue records the entity
     // id, so there is nothing to register under the reader token.
     new_reader.set_requested_deadline_check_timer();
+    new_reader.set_fragment_limits(&self.fragment_limits);
     trace!("Add reader: {new_reader:?}");
     self.message_receiver.add_reader(new_reader);
   }

@@ -1,11 +1,11 @@
 use std::{
   collections::{btree_map::Entry, BTreeMap},
   fmt, iter,
+  time::Duration,
 };
 
-use bit_vec::BitVec;
 use enumflags2::BitFlags;
-use bytes::BytesMut;
+use bytes::{Bytes, BytesMut};
 #[allow(unused_imports)]
 use log::{debug, error, info, trace, warn};
 
@@ -22,76 +22,215 @@ use crate::{
   },
 };
 
-// This is for the assembly of a single object
-struct AssemblyBuffer {
-  buffer_bytes: BytesMut,
-  fragment_count: usize,
-  received_bitmap: BitVec,
+/// Limits on the reassembly of fragmented samples (RTPS DATA_FRAG
+/// submessages).
+///
+/// A DATA_FRAG declares the size of the whole sample (up to 4 GiB), and anyone
+/// who can send a UDP datagram to a receive socket can send one. A reader
+/// therefore refuses samples declared larger than its maximum, stores only the
+/// fragments that actually arrived, keeps a bounded number of incomplete
+/// samples and bytes (evicting incomplete samples beyond that), and drops an
+/// incomplete sample that received nothing for `assembly_timeout`, on a timer.
+/// Set with [`DomainParticipantBuilder::fragment_limits`](crate::DomainParticipantBuilder::fragment_limits).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FragmentLimits {
+  /// Largest sample a user-topic reader reassembles, in bytes of serialized
+  /// payload (including its 4-byte encapsulation header). Fragments of a
+  /// sample declared larger are dropped.
+  pub max_sample_size: usize,
+  /// Largest sample a built-in (discovery) reader reassembles, bytes.
+  pub max_builtin_sample_size: usize,
+  /// Most incomplete samples one reader keeps, all writers together.
+  pub max_assemblies_per_reader: usize,
+  /// Most bytes of incomplete samples one user-topic reader keeps, all writers
+  /// together (the fragments received plus a bookkeeping charge per stored
+  /// run). Should be at least `max_sample_size`, or the largest samples can
+  /// never complete.
+  pub max_assembly_bytes_per_reader: usize,
+  /// Same as `max_assembly_bytes_per_reader`, for a built-in reader.
+  pub max_builtin_assembly_bytes_per_reader: usize,
+  /// An incomplete sample that received no fragment for this long is dropped.
+  /// Checked on a timer, so a stale sample lives at most twice this long even
+  /// if no further traffic arrives.
+  pub assembly_timeout: Duration,
+}
 
-  #[allow(dead_code)] // TODO: Purpose is to use this later for e.g.
-  // garbage collection, in case some buffer is not completed within reasonable time.
+impl FragmentLimits {
+  /// Default [`max_sample_size`](Self::max_sample_size): 256 MiB.
+  pub const DEFAULT_MAX_SAMPLE_SIZE: usize = 256 * 1024 * 1024;
+  /// Default [`max_builtin_sample_size`](Self::max_builtin_sample_size):
+  /// 256 KiB. Discovery samples are a few KiB.
+  pub const DEFAULT_MAX_BUILTIN_SAMPLE_SIZE: usize = 256 * 1024;
+  /// Default [`max_assemblies_per_reader`](Self::max_assemblies_per_reader).
+  pub const DEFAULT_MAX_ASSEMBLIES_PER_READER: usize = 256;
+  /// Default [`assembly_timeout`](Self::assembly_timeout): 10 s.
+  pub const DEFAULT_ASSEMBLY_TIMEOUT: Duration = Duration::from_secs(10);
+
+  /// Limits with the given maximum user sample size; the per-reader byte
+  /// budget is twice that, everything else is default.
+  pub fn with_max_sample_size(max_sample_size: usize) -> Self {
+    Self {
+      max_sample_size,
+      max_assembly_bytes_per_reader: max_sample_size.saturating_mul(2),
+      ..Self::default()
+    }
+  }
+
+  /// The limits that apply to one reader.
+  pub(crate) fn for_reader(&self, builtin: bool) -> ReaderFragmentLimits {
+    ReaderFragmentLimits {
+      max_sample_size: if builtin {
+        self.max_builtin_sample_size
+      } else {
+        self.max_sample_size
+      },
+      max_assemblies: self.max_assemblies_per_reader,
+      max_bytes: if builtin {
+        self.max_builtin_assembly_bytes_per_reader
+      } else {
+        self.max_assembly_bytes_per_reader
+      },
+      timeout: self.assembly_timeout,
+    }
+  }
+}
+
+impl Default for FragmentLimits {
+  fn default() -> Self {
+    Self {
+      max_sample_size: Self::DEFAULT_MAX_SAMPLE_SIZE,
+      max_builtin_sample_size: Self::DEFAULT_MAX_BUILTIN_SAMPLE_SIZE,
+      max_assemblies_per_reader: Self::DEFAULT_MAX_ASSEMBLIES_PER_READER,
+      max_assembly_bytes_per_reader: 2 * Self::DEFAULT_MAX_SAMPLE_SIZE,
+      max_builtin_assembly_bytes_per_reader: 4 * Self::DEFAULT_MAX_BUILTIN_SAMPLE_SIZE,
+      assembly_timeout: Self::DEFAULT_ASSEMBLY_TIMEOUT,
+    }
+  }
+}
+
+/// [`FragmentLimits`] resolved for one reader (user or built-in).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ReaderFragmentLimits {
+  pub max_sample_size: usize,
+  pub max_assemblies: usize,
+  pub max_bytes: usize,
+  pub timeout: Duration,
+}
+
+// Bytes charged against the per-reader budget for each stored run of
+// fragments (map node and `Bytes` handle) and for each incomplete sample, so
+// that floods of tiny fragments are bounded too.
+const RUN_OVERHEAD: usize = 64;
+const ASSEMBLY_OVERHEAD: usize = 256;
+
+// This is for the assembly of a single object.
+//
+// Only the fragments that arrived are stored (as runs, copied out of the
+// receive buffer), never a buffer of the size the DATA_FRAG declares: that
+// size is sender-controlled. The sample is concatenated when complete.
+struct AssemblyBuffer {
+  data_size: usize,
+  fragment_size: usize,
+  fragment_count: usize,
+  // Received fragments as non-overlapping runs:
+  // first fragment (0-based) -> (number of fragments, their bytes).
+  runs: BTreeMap<usize, (usize, Bytes)>,
+  received_fragments: usize,
+  // Memory accounted to this buffer (received bytes + overheads).
+  charged_bytes: usize,
+
   created_time: Timestamp,
   modified_time: Timestamp,
 }
 
 impl AssemblyBuffer {
-  pub fn new(datafrag: &DataFrag) -> Option<Self> {
+  pub fn new(datafrag: &DataFrag, max_sample_size: usize) -> Option<Self> {
     let data_size: usize = datafrag.data_size.try_into().ok()?;
-    let fragment_size: u16 = datafrag.fragment_size;
+    let fragment_size = usize::from(datafrag.fragment_size);
     debug!("new AssemblyBuffer data_size={data_size} frag_size={fragment_size}");
 
-    if fragment_size == 0 || fragment_size as usize > data_size {
-      error!("Cannot create AssemblyBuffer: fragment_size={fragment_size} data_size={data_size}");
+    if data_size > max_sample_size {
+      debug!("Cannot create AssemblyBuffer: data_size={data_size} exceeds {max_sample_size}");
       return None;
     }
-
-    let mut buffer_bytes = BytesMut::with_capacity(data_size);
-    buffer_bytes.resize(data_size, 0);
-
-    let fragment_count = usize::from(datafrag.total_number_of_fragments());
-    if fragment_count == 0 {
-      error!("Cannot create AssemblyBuffer: zero fragment count");
+    if fragment_size == 0 || fragment_size > data_size {
+      debug!("Cannot create AssemblyBuffer: fragment_size={fragment_size} data_size={data_size}");
       return None;
     }
 
     let now = Timestamp::now();
-
     Some(Self {
-      buffer_bytes,
-      fragment_count,
-      received_bitmap: BitVec::from_elem(fragment_count, false),
+      data_size,
+      fragment_size,
+      fragment_count: data_size.div_ceil(fragment_size),
+      runs: BTreeMap::new(),
+      received_fragments: 0,
+      charged_bytes: ASSEMBLY_OVERHEAD,
       created_time: now,
       modified_time: now,
     })
   }
 
-  /// Returns `false` if the fragment run is invalid or out of bounds.
-  pub fn insert_frags(&mut self, datafrag: &DataFrag, frag_size: u16) -> bool {
-    // TODO: Sanity checks? E.g. datafrag.fragment_size == frag_size
-    // Or is this even guaranteed? Can Writer vary fragment size?
-    // Answer: Writer must guarantee constant fragment size per SequenceNumber.
-    // So yes, it is guaranteed. RTPS spec v2.5 Section 8.4.14.1.1 "How to select
-    // the fragment size" even says that the frag size is fixed per-writer.
+  // The not-yet-received fragment ranges within `first..end` (0-based, end
+  // exclusive).
+  fn gaps_within(&self, first: usize, end: usize) -> Vec<(usize, usize)> {
+    let mut gaps = Vec::new();
+    let mut cursor = first;
+    // Runs do not overlap, so only the last run starting at or before `first`
+    // can reach into the range from the left.
+    let from = self
+      .runs
+      .range(..=first)
+      .next_back()
+      .map_or(first, |(s, _)| *s);
+    for (&s, &(n, _)) in self.runs.range(from..end) {
+      if s > cursor {
+        gaps.push((cursor, s));
+      }
+      cursor = cursor.max(s + n);
+      if cursor >= end {
+        break;
+      }
+    }
+    if cursor < end {
+      gaps.push((cursor, end));
+    }
+    gaps
+  }
 
-    let frag_size = usize::from(frag_size);
+  /// Returns `false` if the fragment run is invalid or out of bounds.
+  pub fn insert_frags(&mut self, datafrag: &DataFrag) -> bool {
+    // A writer keeps the fragment size (and of course the data size) of a
+    // sample constant: RTPS spec v2.5 Section 8.4.14.1.1.
+    if usize::from(datafrag.fragment_size) != self.fragment_size
+      || usize::try_from(datafrag.data_size).ok() != Some(self.data_size)
+    {
+      debug!(
+        "insert_frags: fragment_size={} data_size={} differ from the sample's {} {}",
+        datafrag.fragment_size, datafrag.data_size, self.fragment_size, self.data_size
+      );
+      return false;
+    }
+    let frag_size = self.fragment_size;
     let frags_in_submessage = usize::from(datafrag.fragments_in_submessage);
     if frags_in_submessage == 0 {
-      error!("insert_frags: fragments_in_submessage is zero");
+      debug!("insert_frags: fragments_in_submessage is zero");
       return false;
     }
     let fragment_starting_num: usize = match u32::from(datafrag.fragment_starting_num).try_into() {
       Ok(n) if n >= 1 => n,
       _ => {
-        error!(
+        debug!(
           "insert_frags: invalid fragment_starting_num {:?}",
           datafrag.fragment_starting_num
         );
         return false;
       }
     };
-    let start_frag_from_0 = fragment_starting_num - 1;
-    if start_frag_from_0 + frags_in_submessage > self.fragment_count {
-      error!(
+    let first = fragment_starting_num - 1;
+    let end = first + frags_in_submessage;
+    if end > self.fragment_count {
+      debug!(
         "insert_frags: fragment span out of bounds: start={fragment_starting_num} \
          count={frags_in_submessage} total={}",
         self.fragment_count
@@ -99,78 +238,61 @@ impl AssemblyBuffer {
       return false;
     }
 
-    debug!(
-      "insert_frags: datafrag.writer_sn = {:?}, frag_size = {:?}, datafrag.fragment_size = {:?}, \
-       datafrag.fragment_starting_num = {:?}, datafrag.fragments_in_submessage = {:?}, \
-       datafrag.data_size = {:?}",
-      datafrag.writer_sn,
-      frag_size,
-      datafrag.fragment_size,
-      datafrag.fragment_starting_num,
-      datafrag.fragments_in_submessage,
-      datafrag.data_size
-    );
-
-    // unwrap: u32 should fit into usize
-    let from_byte = start_frag_from_0 * frag_size;
-
-    // Last fragment might be smaller than fragment size
-    // Copy reported number of fragments, or as much data as there is, whichever
-    // ends first.
-    // And clamp to assembly buffer length to avoid buffer overrun.
-    let to_before_byte = std::cmp::min(
-      from_byte
-        + std::cmp::min(
-          frags_in_submessage * frag_size,
-          datafrag.serialized_payload.len(),
-        ),
-      self.buffer_bytes.len(),
-    );
-    if from_byte > to_before_byte {
-      error!(
-        "insert_frags: invalid byte range from_byte={from_byte} to_before_byte={to_before_byte}"
+    // Every fragment is `frag_size` bytes except the last one of the sample.
+    // The payload may carry submessage padding after the last fragment.
+    let from_byte = first * frag_size;
+    let to_before_byte = std::cmp::min(end * frag_size, self.data_size);
+    let expected = to_before_byte - from_byte;
+    if datafrag.serialized_payload.len() < expected {
+      debug!(
+        "insert_frags: DATAFRAG too small: fragments {fragment_starting_num}+{frags_in_submessage} \
+         of {} need {expected} bytes, payload has {}",
+        self.fragment_count,
+        datafrag.serialized_payload.len(),
       );
       return false;
     }
-    let payload_size = to_before_byte - from_byte;
 
-    // sanity check data size
-    // Last fragment may be smaller than frags_in_submessage * frag_size
-    let last_frag_in_submessage = start_frag_from_0 + frags_in_submessage;
-    if last_frag_in_submessage < self.fragment_count
-      && datafrag.serialized_payload.len() < frags_in_submessage * frag_size
-    {
-      error!(
-        "Received DATAFRAG too small. fragment_starting_num={} out of fragment_count={}, \
-         frags_in_submessage={}, frag_size={} but payload length = {}. Original data_size={}",
-        fragment_starting_num,
-        self.fragment_count,
-        frags_in_submessage,
-        frag_size,
-        datafrag.serialized_payload.len(),
-        datafrag.data_size,
-      );
-    }
-
-    debug!("insert_frags: from_byte = {from_byte:?}, to_before_byte = {to_before_byte:?}");
-
-    debug!(
-      "insert_frags: dataFrag.serializedPayload.len = {:?}",
-      datafrag.serialized_payload.len()
-    );
-
-    self.buffer_bytes.as_mut()[from_byte..to_before_byte]
-      .copy_from_slice(&datafrag.serialized_payload[..payload_size]);
-
-    for f in 0..frags_in_submessage {
-      self.received_bitmap.set(start_frag_from_0 + f, true);
+    let gaps = self.gaps_within(first, end);
+    if !gaps.is_empty() {
+      // Copy: a slice would keep the whole receive buffer chunk alive.
+      let bytes = Bytes::copy_from_slice(&datafrag.serialized_payload[..expected]);
+      self.charged_bytes += bytes.len();
+      for (a, b) in gaps {
+        let lo = (a - first) * frag_size;
+        let hi = std::cmp::min((b - first) * frag_size, expected);
+        self.runs.insert(a, (b - a, bytes.slice(lo..hi)));
+        self.received_fragments += b - a;
+        self.charged_bytes += RUN_OVERHEAD;
+      }
     }
     self.modified_time = Timestamp::now();
     true
   }
 
   pub fn is_complete(&self) -> bool {
-    self.received_bitmap.all() // return if all are received
+    self.received_fragments == self.fragment_count
+  }
+
+  // The reassembled sample; `None` unless complete.
+  fn into_bytes(mut self) -> Option<Bytes> {
+    if !self.is_complete() {
+      return None;
+    }
+    let bytes = if self.runs.len() == 1 {
+      self.runs.pop_first().map(|(_, (_, b))| b)?
+    } else {
+      let mut buf = BytesMut::with_capacity(self.data_size);
+      for (_, b) in self.runs.values() {
+        buf.extend_from_slice(b);
+      }
+      buf.freeze()
+    };
+    (bytes.len() == self.data_size).then_some(bytes)
+  }
+
+  fn missing_frags(&self) -> Vec<(usize, usize)> {
+    self.gaps_within(0, self.fragment_count)
   }
 }
 
@@ -183,12 +305,12 @@ impl AssemblyBuffer {
 // sample and is only reclaimed by a 10 s idle timeout, growing to gigabytes.
 // When exceeded we evict the oldest (lowest sequence number) buffer, which
 // under best effort is lost anyway and under reliable will be re-requested.
+// (The per-reader limits of `FragmentLimits` apply on top of this.)
 const MAX_ASSEMBLY_BUFFERS: usize = 128;
 
 // Assembles fragments from a single (remote) Writer
 // So there is only one sequence of SNs
 pub(crate) struct FragmentAssembler {
-  fragment_size: u16, // number of bytes per fragment. Each writer must select one constant value.
   assembly_buffers: BTreeMap<SequenceNumber, AssemblyBuffer>,
   // Whether the owning reader is Reliable. This decides which buffer to drop
   // when `MAX_ASSEMBLY_BUFFERS` is exceeded (see `new_datafrag`).
@@ -204,29 +326,29 @@ impl fmt::Debug for FragmentAssembler {
 }
 
 impl FragmentAssembler {
-  pub fn new(fragment_size: u16, reliable: bool) -> Self {
-    debug!("new FragmentAssembler. frag_size = {fragment_size} reliable = {reliable}");
+  pub fn new(reliable: bool) -> Self {
+    debug!("new FragmentAssembler. reliable = {reliable}");
     Self {
-      fragment_size,
       assembly_buffers: BTreeMap::new(),
       reliable,
     }
   }
 
   // Returns completed DDSData, when complete, and disposes the assembly buffer.
+  // Samples declared larger than `max_sample_size` are not assembled.
   pub fn new_datafrag(
     &mut self,
     datafrag: &DataFrag,
     flags: BitFlags<DATAFRAG_Flags>,
+    max_sample_size: usize,
   ) -> Option<DDSData> {
     let writer_sn = datafrag.writer_sn;
-    let frag_size = self.fragment_size;
 
     let sn = datafrag.writer_sn;
     match self.assembly_buffers.entry(sn) {
       Entry::Vacant(v) => {
-        let Some(buf) = AssemblyBuffer::new(datafrag) else {
-          error!("new_datafrag: failed to create AssemblyBuffer for {sn:?}");
+        let Some(buf) = AssemblyBuffer::new(datafrag, max_sample_size) else {
+          debug!("new_datafrag: no AssemblyBuffer for {sn:?}");
           return None;
         };
         v.insert(buf);
@@ -239,8 +361,11 @@ impl FragmentAssembler {
       return None;
     };
 
-    if !assembly_buffer.insert_frags(datafrag, frag_size) {
-      error!("new_datafrag: rejected invalid DATAFRAG for {sn:?}");
+    if !assembly_buffer.insert_frags(datafrag) {
+      debug!("new_datafrag: rejected invalid DATAFRAG for {sn:?}");
+      if assembly_buffer.received_fragments == 0 {
+        self.assembly_buffers.remove(&sn);
+      }
       return None;
     }
 
@@ -248,14 +373,17 @@ impl FragmentAssembler {
       debug!("new_datafrag: COMPLETED FRAGMENT");
       if let Some(assembly_buffer) = self.assembly_buffers.remove(&writer_sn) {
         // Return what we have assembled.
-        let serialized_data_or_key =
-          SerializedPayload::from_bytes(&assembly_buffer.buffer_bytes.freeze()).map_or_else(
-            |e| {
-              error!("Deserializing SerializedPayload from DATAFRAG: {:?}", e);
-              None
-            },
-            Some,
-          )?;
+        let Some(bytes) = assembly_buffer.into_bytes() else {
+          error!("new_datafrag: reassembled sample has the wrong size");
+          return None;
+        };
+        let serialized_data_or_key = SerializedPayload::from_bytes(&bytes).map_or_else(
+          |e| {
+            error!("Deserializing SerializedPayload from DATAFRAG: {:?}", e);
+            None
+          },
+          Some,
+        )?;
         let dds_data = if flags.contains(DATAFRAG_Flags::Key) {
           DDSData::new_disposed_by_key(ChangeKind::NotAliveDisposed, serialized_data_or_key)
         } else {
@@ -307,6 +435,42 @@ impl FragmentAssembler {
     });
   }
 
+  /// Number of incomplete samples.
+  pub fn assembly_count(&self) -> usize {
+    self.assembly_buffers.len()
+  }
+
+  /// Bytes accounted to the incomplete samples.
+  pub fn charged_bytes(&self) -> usize {
+    self
+      .assembly_buffers
+      .values()
+      .map(|ab| ab.charged_bytes)
+      .sum()
+  }
+
+  /// The (creation time, SN) of the newest or the oldest incomplete sample.
+  pub fn created_extreme(&self, newest: bool) -> Option<(Timestamp, SequenceNumber)> {
+    let it = self
+      .assembly_buffers
+      .iter()
+      .map(|(sn, ab)| (ab.created_time, *sn));
+    if newest {
+      it.max()
+    } else {
+      it.min()
+    }
+  }
+
+  /// Drops an incomplete sample.
+  pub fn evict(&mut self, sn: SequenceNumber) {
+    self.assembly_buffers.remove(&sn);
+  }
+
+  pub fn is_empty(&self) -> bool {
+    self.assembly_buffers.is_empty()
+  }
+
   // pub fn partially_received_sequence_numbers_iterator(&self) -> Box<dyn
   // Iterator<Item=SequenceNumber>> {   // Since we should only know about SNs
   // via DATAFRAG messages   // and AssemblyBuffers are removed immediately on
@@ -327,9 +491,11 @@ impl FragmentAssembler {
     match self.assembly_buffers.get(&seq) {
       None => Box::new(iter::empty()),
       Some(ab) => {
-        let iter = (0..ab.fragment_count)
-          .filter(move |f| !ab.received_bitmap.get(*f).unwrap_or(true))
-          .map(|f| FragmentNumber::new((f + 1).try_into().unwrap()));
+        let iter = ab
+          .missing_frags()
+          .into_iter()
+          .flat_map(|(a, b)| a..b)
+          .filter_map(|f| u32::try_from(f + 1).ok().map(FragmentNumber::new));
         Box::new(iter)
       }
     }
@@ -369,17 +535,17 @@ mod tests {
 
     // First submessage packs fragments 1 and 2 (K = 2, 2048 payload bytes).
     let first = datafrag(1, 2, frag_size, data_size, whole[0..2048].to_vec());
-    let mut ab = AssemblyBuffer::new(&first).expect("valid first fragment");
+    let mut ab = AssemblyBuffer::new(&first, usize::MAX).expect("valid first fragment");
     assert!(!ab.is_complete());
-    ab.insert_frags(&first, frag_size);
+    assert!(ab.insert_frags(&first));
     assert!(!ab.is_complete(), "still missing the tail fragment");
 
     // Trailing submessage carries the shorter final fragment 3 (552 bytes).
     let tail = datafrag(3, 1, frag_size, data_size, whole[2048..2600].to_vec());
-    ab.insert_frags(&tail, frag_size);
+    assert!(ab.insert_frags(&tail));
     assert!(ab.is_complete(), "all fragments received");
     assert_eq!(
-      &ab.buffer_bytes[..],
+      &ab.into_bytes().expect("complete")[..],
       &whole[..],
       "reassembled bytes must match the original sample"
     );
@@ -393,10 +559,10 @@ mod tests {
     let whole: Vec<u8> = (0..data_size as usize).map(|i| (i % 97) as u8).collect();
 
     let all = datafrag(1, 3, frag_size, data_size, whole.clone());
-    let mut ab = AssemblyBuffer::new(&all).expect("valid fragment set");
-    ab.insert_frags(&all, frag_size);
+    let mut ab = AssemblyBuffer::new(&all, usize::MAX).expect("valid fragment set");
+    assert!(ab.insert_frags(&all));
     assert!(ab.is_complete());
-    assert_eq!(&ab.buffer_bytes[..], &whole[..]);
+    assert_eq!(&ab.into_bytes().expect("complete")[..], &whole[..]);
   }
 
   // Malformed span (starting at last fragment but claiming multiple fragments)
@@ -406,8 +572,8 @@ mod tests {
     let frag_size = 256u16;
     let data_size = 512u32; // 2 fragments total
     let bad = datafrag(2, 2, frag_size, data_size, vec![0u8; 256]);
-    let mut ab = AssemblyBuffer::new(&bad).expect("buffer for valid data_size");
-    assert!(!ab.insert_frags(&bad, frag_size));
+    let mut ab = AssemblyBuffer::new(&bad, usize::MAX).expect("buffer for valid data_size");
+    assert!(!ab.insert_frags(&bad));
     assert!(!ab.is_complete());
   }
 
@@ -421,9 +587,94 @@ mod tests {
     let frag_size = 256u16;
     let data_size = 512u32;
     let bad = datafrag(2, 2, frag_size, data_size, vec![0u8; 256]);
-    let mut fa = FragmentAssembler::new(frag_size, true);
+    let mut fa = FragmentAssembler::new(true);
     assert!(fa
-      .new_datafrag(&bad, BitFlags::<DATAFRAG_Flags>::empty())
+      .new_datafrag(&bad, BitFlags::<DATAFRAG_Flags>::empty(), usize::MAX)
       .is_none());
+  }
+
+  // A DATAFRAG declaring a sample larger than the limit allocates nothing
+  // (issue: one ~100-byte packet declaring 4 GiB made the reader allocate
+  // 4 GiB).
+  #[test]
+  fn declared_size_over_limit_is_refused() {
+    use enumflags2::BitFlags;
+
+    use super::FragmentAssembler;
+    use crate::messages::submessages::submessages::DATAFRAG_Flags;
+
+    for data_size in [1u32 << 30, u32::MAX] {
+      let huge = datafrag(1, 1, 1024, data_size, vec![0u8; 1024]);
+      assert!(AssemblyBuffer::new(&huge, 64 << 20).is_none());
+      let mut fa = FragmentAssembler::new(false);
+      assert!(fa
+        .new_datafrag(&huge, BitFlags::<DATAFRAG_Flags>::empty(), 64 << 20)
+        .is_none());
+      assert!(fa.is_empty());
+    }
+  }
+
+  // Within the limit, memory follows the fragments that arrived, not the
+  // declared size.
+  #[test]
+  fn memory_follows_received_fragments() {
+    let frag_size = 1024u16;
+    let data_size = 60u32 << 20; // 60 MiB declared
+    let one = datafrag(7, 1, frag_size, data_size, vec![1u8; 1024]);
+    let mut ab = AssemblyBuffer::new(&one, 64 << 20).expect("within limit");
+    assert!(ab.insert_frags(&one));
+    assert!(ab.charged_bytes < 4096, "charged {}", ab.charged_bytes);
+    assert!(!ab.is_complete());
+    let missing: usize = ab.missing_frags().iter().map(|(a, b)| b - a).sum();
+    assert_eq!(missing, ab.fragment_count - 1);
+  }
+
+  // A run shorter than its fragments claim is refused (it would be delivered
+  // zero-filled); submessage padding after the last fragment is accepted.
+  #[test]
+  fn short_runs_are_refused_and_padding_accepted() {
+    let short = datafrag(1, 2, 256, 600, vec![0u8; 300]);
+    let mut ab = AssemblyBuffer::new(&short, usize::MAX).expect("valid");
+    assert!(!ab.insert_frags(&short));
+    let padded = datafrag(3, 1, 256, 600, vec![9u8; 88 + 3]);
+    assert!(ab.insert_frags(&padded));
+    assert_eq!(ab.received_fragments, 1);
+  }
+
+  // Overlapping and repeated runs store each fragment once and reassemble the
+  // original bytes.
+  #[test]
+  fn overlapping_runs_reassemble_once() {
+    let frag_size = 100u16;
+    let data_size = 450u32; // 5 fragments
+    let whole: Vec<u8> = (0..data_size as usize).map(|i| (i % 211) as u8).collect();
+    let mut ab = AssemblyBuffer::new(
+      &datafrag(2, 2, frag_size, data_size, whole[100..300].to_vec()),
+      usize::MAX,
+    )
+    .expect("valid");
+    for (start, k) in [(2u32, 2u16), (2, 2), (1, 3), (3, 3)] {
+      let from = (start as usize - 1) * 100;
+      let to = std::cmp::min(from + k as usize * 100, data_size as usize);
+      assert!(ab.insert_frags(&datafrag(
+        start,
+        k,
+        frag_size,
+        data_size,
+        whole[from..to].to_vec()
+      )));
+    }
+    assert_eq!(ab.received_fragments, 5);
+    assert!(ab.is_complete());
+    assert_eq!(&ab.into_bytes().expect("complete")[..], &whole[..]);
+  }
+
+  // A different fragment or data size for the same sample is refused.
+  #[test]
+  fn inconsistent_sizes_are_refused() {
+    let a = datafrag(1, 1, 256, 1000, vec![0u8; 256]);
+    let mut ab = AssemblyBuffer::new(&a, usize::MAX).expect("valid");
+    assert!(!ab.insert_frags(&datafrag(2, 1, 128, 1000, vec![0u8; 128])));
+    assert!(!ab.insert_frags(&datafrag(2, 1, 256, 2000, vec![0u8; 256])));
   }
 }

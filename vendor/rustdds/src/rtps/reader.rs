@@ -42,8 +42,11 @@ use crate::{
   network::udp_sender::UDPSender,
   polling::{ReadySender, SharedTimer, WakeReceiver},
   rtps::{
-    fragment_assembler::FragmentAssembler, message_receiver::MessageReceiverState,
-    rtps_writer_proxy::RtpsWriterProxy, timed_event::DpTimerEvent, Message,
+    fragment_assembler::{FragmentAssembler, FragmentLimits, ReaderFragmentLimits},
+    message_receiver::MessageReceiverState,
+    rtps_writer_proxy::RtpsWriterProxy,
+    timed_event::DpTimerEvent,
+    Message,
   },
   structure::{
     cache_change::{CacheChange, ChangeKind},
@@ -66,6 +69,8 @@ use crate::no_security::SecurityPluginsHandle;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum TimedEvent {
   DeadlineMissedCheck,
+  // Drop incomplete fragmented samples that stopped receiving data.
+  FragmentGc,
 }
 
 // Some pieces necessary to construct a reader.
@@ -135,6 +140,8 @@ pub(crate) struct Reader {
 
   fragment_assemblers: BTreeMap<GUID, FragmentAssembler>,
   last_fragment_garbage_collect: Timestamp,
+  fragment_limits: ReaderFragmentLimits,
+  fragment_gc_scheduled: bool,
   matched_writers: BTreeMap<GUID, RtpsWriterProxy>,
   writer_match_count_total: i32, // total count, never decreases
 
@@ -153,9 +160,6 @@ pub(crate) struct Reader {
   security_plugins: Option<SecurityPluginsHandle>,
 }
 
-// If we are assembling a fragment, but it does not receive any updates
-// for this time, the AssemblyBuffer is just dropped.
-const FRAGMENT_ASSEMBLY_TIMEOUT: Duration = Duration::from_secs(10);
 // minimum interval (max frequency) of AssemblyBuffer GC
 const MIN_FRAGMENT_GC_INTERVAL: Duration = Duration::from_secs(2);
 
@@ -202,6 +206,9 @@ impl Reader {
       received_heartbeat_count: 0,
       fragment_assemblers: BTreeMap::new(),
       last_fragment_garbage_collect: Timestamp::now(),
+      fragment_limits: FragmentLimits::default()
+        .for_reader(!i.guid.entity_id.entity_kind.is_user_defined()),
+      fragment_gc_scheduled: false,
       matched_writers: BTreeMap::new(),
       writer_match_count_total: 0,
       requested_deadline_missed_count: 0,
@@ -216,6 +223,12 @@ impl Reader {
       security_plugins: i.security_plugins,
     }
   }
+  /// Sets the limits on reassembling fragmented samples (the user-topic or the
+  /// built-in ones, by this reader's entity kind).
+  pub(crate) fn set_fragment_limits(&mut self, limits: &FragmentLimits) {
+    self.fragment_limits = limits.for_reader(!self.my_guid.entity_id.entity_kind.is_user_defined());
+  }
+
   // TODO: check if it's necessary to implement different handlers for discovery
   // and user messages
 
@@ -323,6 +336,11 @@ impl Reader {
       TimedEvent::DeadlineMissedCheck => {
         self.handle_requested_deadline_event();
         self.set_requested_deadline_check_timer(); // re-prime timer
+      }
+      TimedEvent::FragmentGc => {
+        self.fragment_gc_scheduled = false;
+        self.expire_fragments(Timestamp::now());
+        self.schedule_fragment_gc();
       }
     }
   }
@@ -633,11 +651,31 @@ impl Reader {
       write_options_b = write_options_b.related_sample_identity(related_sample_identity);
     }
 
+    // Reassembly costs memory, so only for writers we know. Discovery makes
+    // remote writers known: the SPDP reader must hear from unknown
+    // participants (its samples are small and bounded by the built-in
+    // limits), a stateless reader has no matched writers by design, and every
+    // other reader, built-in SEDP ones included, has its writers matched once
+    // the remote participant is discovered (a reliable writer re-sends).
+    if !self.like_stateless
+      && self.my_guid.entity_id != EntityId::SPDP_BUILTIN_PARTICIPANT_READER
+      && !self.matched_writers.contains_key(&writer_guid)
+    {
+      debug!(
+        "DATAFRAG from unmatched writer {writer_guid:?} to {:?} dropped",
+        self.my_guid.entity_id
+      );
+      return;
+    }
+
     // Feed to fragment assembler ...
     let writer_seq_num = datafrag.writer_sn; // for borrow checker
-    let completed_dds_data = self
-      .fragment_assembler_mutable(writer_guid, datafrag.fragment_size)
-      .new_datafrag(datafrag, datafrag_flags);
+    let max_sample_size = self.fragment_limits.max_sample_size;
+    let completed_dds_data = self.fragment_assembler_mutable(writer_guid).new_datafrag(
+      datafrag,
+      datafrag_flags,
+      max_sample_size,
+    );
 
     // ... and continue processing, if data was completed.
     if let Some(dds_data) = completed_dds_data {
@@ -653,18 +691,68 @@ impl Reader {
     } else {
       self.garbage_collect_fragments();
     }
+    self.enforce_fragment_limits();
+    self.schedule_fragment_gc();
   }
 
-  fn fragment_assembler_mutable(
-    &mut self,
-    writer_guid: GUID,
-    frag_size: u16,
-  ) -> &mut FragmentAssembler {
+  fn fragment_assembler_mutable(&mut self, writer_guid: GUID) -> &mut FragmentAssembler {
     let reliable = self.reliability != policy::Reliability::BestEffort;
     self
       .fragment_assemblers
       .entry(writer_guid)
-      .or_insert_with(|| FragmentAssembler::new(frag_size, reliable))
+      .or_insert_with(|| FragmentAssembler::new(reliable))
+  }
+
+  // Evicts incomplete samples while this reader holds more of them, or more
+  // bytes in them, than its limits allow; forgets writers with none left.
+  // Victim as in `FragmentAssembler::new_datafrag`: reliable readers drop the
+  // newest sample (the writer re-sends it), best-effort ones the oldest.
+  fn enforce_fragment_limits(&mut self) {
+    let newest = self.reliability != policy::Reliability::BestEffort;
+    loop {
+      let (count, bytes) =
+        self
+          .fragment_assemblers
+          .values()
+          .fold((0usize, 0usize), |(c, b), fa| {
+            (
+              c + fa.assembly_count(),
+              b.saturating_add(fa.charged_bytes()),
+            )
+          });
+      if count <= self.fragment_limits.max_assemblies && bytes <= self.fragment_limits.max_bytes {
+        break;
+      }
+      let victim = self
+        .fragment_assemblers
+        .iter()
+        .filter_map(|(g, fa)| fa.created_extreme(newest).map(|(t, sn)| (t, *g, sn)))
+        .reduce(|a, b| if (b.0 > a.0) == newest { b } else { a });
+      let Some((_, writer, sn)) = victim else {
+        break;
+      };
+      debug!("Fragment limits: dropping incomplete {sn:?} from {writer:?} ({count} samples, {bytes} bytes)");
+      if let Some(fa) = self.fragment_assemblers.get_mut(&writer) {
+        fa.evict(sn);
+      }
+    }
+    self.fragment_assemblers.retain(|_, fa| !fa.is_empty());
+  }
+
+  // Keeps a garbage-collection timer running while samples are incomplete, so
+  // stale ones expire even if no further traffic arrives.
+  fn schedule_fragment_gc(&mut self) {
+    if self.fragment_gc_scheduled || self.fragment_assemblers.is_empty() {
+      return;
+    }
+    self.fragment_gc_scheduled = true;
+    self.timed_event_timer.borrow_mut().set_timeout(
+      self.fragment_limits.timeout,
+      DpTimerEvent::Reader {
+        entity_id: self.my_guid.entity_id,
+        event: TimedEvent::FragmentGc,
+      },
+    );
   }
 
   fn garbage_collect_fragments(&mut self) {
@@ -674,20 +762,26 @@ impl Reader {
     // data and can therefore be discarded.
     let now = Timestamp::now();
     if now - self.last_fragment_garbage_collect > MIN_FRAGMENT_GC_INTERVAL {
-      self.last_fragment_garbage_collect = now;
-
-      let expire_before = now - FRAGMENT_ASSEMBLY_TIMEOUT;
-
-      self
-        .fragment_assemblers
-        .iter_mut()
-        .for_each(|(writer, fa)| {
-          debug!("AssemblyBuffer GC writer {writer:?}");
-          fa.garbage_collect_before(expire_before);
-        });
+      self.expire_fragments(now);
     } else {
       trace!("Not yet AssemblyBuffer GC time.");
     }
+  }
+
+  // Drops the incomplete samples that received nothing for the timeout.
+  fn expire_fragments(&mut self, now: Timestamp) {
+    self.last_fragment_garbage_collect = now;
+
+    let expire_before = now - Duration::from(self.fragment_limits.timeout);
+
+    self
+      .fragment_assemblers
+      .iter_mut()
+      .for_each(|(writer, fa)| {
+        debug!("AssemblyBuffer GC writer {writer:?}");
+        fa.garbage_collect_before(expire_before);
+      });
+    self.fragment_assemblers.retain(|_, fa| !fa.is_empty());
   }
 
   fn missing_frags_for(
@@ -1020,7 +1114,8 @@ impl Reader {
             let mut missing_frags = this.missing_frags_for(writer_guid, sn);
             let first_missing = missing_frags.next();
             if let Some(first) = first_missing {
-              let missing_frags_set = iter::once(first).chain(missing_frags).collect(); // "undo" the .next() above
+              // A FragmentNumberSet spans at most 256 numbers: collect no more.
+              let missing_frags_set = iter::once(first).chain(missing_frags.take(255)).collect(); // "undo" the .next() above
               let nf = NackFrag {
                 reader_id,
                 writer_id: writer_proxy.remote_writer_guid.entity_id,

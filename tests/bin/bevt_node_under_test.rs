@@ -1,0 +1,47 @@
+//! The ROS 2 node as a separate process, for tests that measure its memory or inspect its
+//! sockets (an in-process node shares the test's memory and sockets).
+//!
+//! `bevt_node_under_test [--ros-args ...]` takes `bevt_node`'s arguments and runs the same
+//! launch path (`launch_from_args`, `NodeCore`, `ros::run`) until its standard input
+//! closes, so it never outlives the test that started it.
+
+use bevt_node::app::NodeCore;
+use bevt_node::node_params::launch_from_args;
+use bevt_node::ros;
+use std::io::Read;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let launch = match launch_from_args(&args, |k| std::env::var(k).ok()) {
+        Ok(l) => l,
+        Err(e) => {
+            eprintln!("bevt_node_under_test: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    let s = stop.clone();
+    let watcher = std::thread::Builder::new()
+        .name("stdin-watch".into())
+        .spawn(move || {
+            let mut sink = [0u8; 64];
+            let mut stdin = std::io::stdin();
+            while matches!(stdin.read(&mut sink), Ok(n) if n > 0) {}
+            s.store(true, Ordering::Relaxed);
+        });
+    if let Err(e) = watcher {
+        eprintln!("bevt_node_under_test: cannot watch stdin: {e}");
+        return ExitCode::FAILURE;
+    }
+    let core = NodeCore::new(launch.tracker.clone(), launch.node.clone());
+    match ros::run(core, &launch.ros, stop, |_| {}) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("bevt_node_under_test: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
