@@ -14,6 +14,16 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+/// These tests send several requests back to back (and the ground station retries), so
+/// the bucket is deeper than the default; the rate limit itself is tested in
+/// node_limits.rs.
+fn node_settings() -> NodeSettings {
+    NodeSettings {
+        reinit_burst: 10,
+        ..NodeSettings::default()
+    }
+}
+
 /// A domain per test and per process, so parallel tests and runs do not meet.
 fn domain(k: u16) -> u16 {
     100 + (std::process::id() % 40) as u16 * 3 + k
@@ -47,7 +57,7 @@ fn start(k: u16) -> Running {
     let stop = Arc::new(AtomicBool::new(false));
     let core = NodeCore::new(
         TrackerConfig::default().validate().unwrap(),
-        NodeSettings::default(),
+        node_settings(),
     );
     let (s2, st2) = (settings.clone(), stop.clone());
     let node = std::thread::Builder::new()
@@ -219,7 +229,7 @@ mod topics_and_bad_input {
         let stop = Arc::new(AtomicBool::new(false));
         let core = NodeCore::new(
             TrackerConfig::default().validate().unwrap(),
-            NodeSettings::default(),
+            node_settings(),
         );
         let (s2, st2) = (settings.clone(), stop.clone());
         let node = std::thread::spawn(move || run(core, &s2, st2, |_| {}).unwrap());
