@@ -104,6 +104,13 @@ enum Cmd {
     },
 }
 
+/// Smallest and largest side of a demo frame, pixels (a frame is generated in memory).
+const DEMO_MIN_SIDE: usize = 64;
+/// See [`DEMO_MIN_SIDE`].
+const DEMO_MAX_SIDE: usize = 4096;
+/// Most demo frames (boxes are kept per frame).
+const DEMO_MAX_FRAMES: usize = 100_000;
+
 fn spec_of(c: &ConfigArgs) -> Result<bevt_core::TrackerSpec> {
     let mut set = c.set.clone();
     if let Some(t) = c.threads {
@@ -128,13 +135,17 @@ fn demo(
     every: usize,
 ) -> Result<ExitCode> {
     let spec = spec_of(cfg)?;
-    if width < 64 || height < 64 {
-        bail!("the demo needs frames of at least 64x64 pixels");
+    let sides = DEMO_MIN_SIDE..=DEMO_MAX_SIDE;
+    if !sides.contains(&width) || !sides.contains(&height) {
+        bail!("the demo needs frames of {DEMO_MIN_SIDE}..={DEMO_MAX_SIDE} pixels a side, got {width}x{height}");
+    }
+    if !(2..=DEMO_MAX_FRAMES).contains(&frames) {
+        bail!("--frames {frames}: expected 2..={DEMO_MAX_FRAMES}");
     }
     let seq = SynthParams {
         width,
         height,
-        frames: frames.max(2),
+        frames,
         target: (width as f32 / 8.0, height as f32 / 7.0),
         path_amplitude: (width as f32 / 5.0, height as f32 / 6.0),
         ..SynthParams::default()
@@ -443,6 +454,23 @@ mod tests {
         };
         let out = dir.join(format!("out_{}.txt", init.len()));
         track(&cfg, &dir, init, Some(&out))
+    }
+
+    #[test]
+    fn demo_sizes_are_bounded_before_anything_is_allocated() {
+        let cfg = ConfigArgs {
+            config: None,
+            set: Vec::new(),
+            threads: None,
+        };
+        for (frames, w, h) in [
+            (10, 100_000, 100_000),
+            (10, 32, 64),
+            (usize::MAX, 640, 360),
+            (1, 640, 360),
+        ] {
+            assert!(demo(&cfg, frames, w, h, 1).is_err(), "{frames} {w}x{h}");
+        }
     }
 
     #[test]
