@@ -666,3 +666,95 @@ fn resp_track_id(seen: &[TrackStatus]) -> u32 {
         .find(|s| s.state == TrackStatus::STATE_TRACKING)
         .map_or(0, |s| s.track_id)
 }
+
+/// Margin over twice the steady memory of a node process that only this test drives.
+const PROCESS_RSS_MARGIN_KIB: u64 = 64 * 1024;
+
+/// `VmRSS` and `VmHWM` (peak) of process `pid`, KiB.
+fn process_memory(pid: u32) -> (u64, u64) {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap();
+    let field = |name: &str| -> u64 {
+        s.lines()
+            .find_map(|l| l.strip_prefix(name))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+            .unwrap()
+    };
+    (field("VmRSS:"), field("VmHWM:"))
+}
+
+#[test]
+fn a_separate_node_process_stays_within_twice_its_steady_memory_under_the_bomb_set() {
+    use std::process::{Command, Stdio};
+    let s = settings(4);
+    // The node as its own process (stops when its stdin closes).
+    let mut child = Command::new(env!("CARGO_BIN_EXE_bevt_node_under_test"))
+        .args(["--ros-args", "-p", &format!("domain_id:={}", s.domain_id)])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let pid = child.id();
+    let peer = RawPeer::new(&s).unwrap();
+    let gs = GroundStation::new(&s).unwrap();
+    let seq = SynthParams::default();
+    let (m0, t0) = image(&seq, 0);
+    send_until_reported(&gs, m0.header.stamp, || peer.image(m0.clone()));
+    let resp = gs
+        .reinit(
+            &reinit_request(t0, m0.header.stamp, ""),
+            Duration::from_secs(10),
+        )
+        .expect("reinit answered");
+    assert!(resp.success, "{}", resp.message);
+    let mut k = 1;
+    let good = |k: &mut usize| {
+        let (m, truth) = image(&seq, *k);
+        *k += 1;
+        let st = send_until_reported(&gs, m.header.stamp, || peer.image(m.clone()));
+        assert_eq!(st.state, TrackStatus::STATE_TRACKING, "{}", st.reason);
+        let b = BBox::new(st.x, st.y, st.width, st.height);
+        assert!(
+            b.center().distance(&truth.center()) < 5.0,
+            "{b:?} vs {truth:?}"
+        );
+    };
+    // Steady state: the ring buffer full (30 frames), the tracker warm.
+    for _ in 0..35 {
+        good(&mut k);
+    }
+    let (steady, _) = process_memory(pid);
+    for _ in 0..BOMB_ROUNDS {
+        let (frame, _) = image(&seq, k);
+        for (name, format, data, why) in bombs(&frame) {
+            let msg = CompressedImage {
+                header: Header {
+                    stamp: wall_stamp(),
+                    frame_id: "cam".into(),
+                },
+                format: format.into(),
+                data,
+            };
+            let st = send_until_reported(&gs, msg.header.stamp, || peer.compressed(msg.clone()));
+            assert_eq!(st.state, TrackStatus::STATE_ERROR, "{name}: {}", st.reason);
+            assert!(
+                st.reason.to_lowercase().contains(why),
+                "{name}: {}",
+                st.reason
+            );
+            good(&mut k);
+        }
+    }
+    let (after, peak) = process_memory(pid);
+    drop(child.stdin.take());
+    let _ = child.wait();
+    println!(
+        "node process VmRSS: steady {} MiB, after {BOMB_ROUNDS} bomb sets {} MiB, peak {} MiB",
+        steady / 1024,
+        after / 1024,
+        peak / 1024
+    );
+    let bound = 2 * steady + PROCESS_RSS_MARGIN_KIB;
+    assert!(after <= bound, "VmRSS {steady} -> {after} KiB");
+    assert!(peak <= bound, "VmHWM {peak} KiB (steady {steady} KiB)");
+}
