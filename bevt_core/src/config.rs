@@ -5,10 +5,13 @@
 //! ALGORITHM.md is a field here; where the paper and the reference MATLAB differ the choice
 //! is an enum, and its default is documented on the field.
 
+use crate::confidence::{ConfidenceMeasure, ConfidenceParams};
 use crate::error::ConfigError;
 use crate::features::cnn_config::CnnConfig;
 use crate::filter::admm::{AdmmParams, PenaltyKind};
-use crate::verify::{ConsensusNorm, VerifyParams};
+use crate::redetect::RedetectParams;
+use crate::track_state::StateParams;
+use crate::verify::{ConsensusNorm, GateParams, VerificationScore, VerifyParams};
 use serde::{Deserialize, Serialize};
 
 /// Which features the tracker uses.
@@ -168,6 +171,9 @@ impl Default for LearningConfig {
 pub struct VerificationConfig {
     /// Off: learn every frame at the base rate (ablation).
     pub enabled: bool,
+    /// The score that gates learning: `confidence` (the per-frame confidence, default) or
+    /// `reference` (the consensus `C` with `threshold_low`/`threshold_high`, paper fidelity).
+    pub score: VerificationScore,
     /// `spectral` (reference) or `frobenius_sq` (paper).
     pub norm: ConsensusNorm,
     /// At or below: do not learn (ref 0.20).
@@ -176,16 +182,111 @@ pub struct VerificationConfig {
     pub threshold_high: f32,
     /// Rate γ of the ideal response model (ref 0.013).
     pub response_model_rate: f32,
+    /// `score: confidence`: a frame whose score is below this fraction of the running
+    /// reference level is not learned (a sudden drop, e.g. an occlusion).
+    pub gate_low: f32,
+    /// `score: confidence`: at or above this fraction of the reference, learn at the
+    /// reinforced rate (below it, the base rate).
+    pub gate_high: f32,
+    /// `score: confidence`: frames skipped in a row after which one frame is learned at the
+    /// base rate anyway, so verification never locks the tracker out of learning.
+    pub max_consecutive_skips: usize,
 }
 
 impl Default for VerificationConfig {
     fn default() -> Self {
         Self {
             enabled: true,
+            score: VerificationScore::Confidence,
             norm: ConsensusNorm::Spectral,
             threshold_low: 0.2,
             threshold_high: 0.5,
             response_model_rate: 0.013,
+            gate_low: 0.5,
+            gate_high: 0.8,
+            max_consecutive_skips: 5,
+        }
+    }
+}
+
+/// Per-frame confidence (see [`crate::confidence`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ConfidenceConfig {
+    /// `peak`, `psr` or `peak_psr` (geometric mean), each relative to its running reference.
+    pub measure: ConfidenceMeasure,
+    /// Score at which the confidence is 0.5 (`peak_psr`: 5; `peak`: about 0.5; `psr`: about
+    /// 8); confidence = score / (score + half_score).
+    pub half_score: f32,
+    /// Frames (after the initial one) whose mean is the learning gate's first reference
+    /// level; no frame of the warm-up is skipped.
+    pub warmup_frames: usize,
+    /// Running-average rate of the gate's reference level, per frame (0–1).
+    pub reference_rate: f32,
+    /// Half-side of the square around the peak left out of the PSR sidelobe, cells.
+    pub psr_exclusion_cells: usize,
+}
+
+impl Default for ConfidenceConfig {
+    fn default() -> Self {
+        Self {
+            measure: ConfidenceMeasure::PeakPsr,
+            half_score: 5.0,
+            warmup_frames: 10,
+            reference_rate: 0.1,
+            psr_exclusion_cells: 2,
+        }
+    }
+}
+
+/// Track state machine (see [`crate::track_state`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrackStateConfig {
+    /// Confidence below this is unconfident (0–1).
+    pub lost_threshold: f32,
+    /// Unconfident frames in a row that make the target lost.
+    pub lost_frames: usize,
+}
+
+impl Default for TrackStateConfig {
+    fn default() -> Self {
+        Self {
+            lost_threshold: 0.3,
+            lost_frames: 5,
+        }
+    }
+}
+
+/// Re-detection while lost (see [`crate::redetect`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RedetectionConfig {
+    /// Search the frame for a lost target; off: only the window at the last known position
+    /// is searched (with the same confirmation), at the scale of the loss.
+    pub enabled: bool,
+    /// Search windows evaluated per lost frame (the time bound; one window costs about one
+    /// scale of a normal frame).
+    pub windows_per_frame: usize,
+    /// Scales tried, relative to the target scale when it was lost.
+    pub scales: Vec<f32>,
+    /// Distance between tile centres, fraction of the search-window side.
+    pub tile_stride: f32,
+    /// Confidence at or above which a window is a candidate (0–1).
+    pub reacquire_threshold: f32,
+    /// Frames in a row a candidate must stay confident before the track is taken back.
+    pub reacquire_frames: usize,
+}
+
+impl Default for RedetectionConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            windows_per_frame: 8,
+            scales: vec![1.0, 0.8, 1.25],
+            tile_stride: 0.5,
+            reacquire_threshold: 0.5,
+            reacquire_frames: 3,
         }
     }
 }
@@ -204,8 +305,14 @@ pub struct TrackerConfig {
     pub detection: DetectionConfig,
     /// Learning rates.
     pub learning: LearningConfig,
-    /// Consensus verification.
+    /// Consensus verification and the learning gate.
     pub verification: VerificationConfig,
+    /// Per-frame confidence.
+    pub confidence: ConfidenceConfig,
+    /// Track state machine.
+    pub track_state: TrackStateConfig,
+    /// Re-detection while lost.
+    pub redetection: RedetectionConfig,
     /// Worker threads for the per-scale work of one frame (1 = sequential). Work runs on
     /// the caller's rayon pool; the core spawns no threads itself.
     pub threads: usize,
@@ -220,6 +327,9 @@ impl Default for TrackerConfig {
             detection: DetectionConfig::default(),
             learning: LearningConfig::default(),
             verification: VerificationConfig::default(),
+            confidence: ConfidenceConfig::default(),
+            track_state: TrackStateConfig::default(),
+            redetection: RedetectionConfig::default(),
             threads: 1,
         }
     }
@@ -234,6 +344,29 @@ pub struct TrackerSpec {
     pub admm: AdmmParams,
     /// Verification parameters.
     pub verify: VerifyParams,
+    /// Learning gate of `verification.score: confidence`.
+    pub gate: GateParams,
+    /// Confidence parameters.
+    pub confidence: ConfidenceParams,
+    /// State machine parameters.
+    pub states: StateParams,
+    /// Re-detection parameters.
+    pub redetect: RedetectParams,
+}
+
+/// Largest number of re-detection scales.
+const MAX_REDETECT_SCALES: usize = 8;
+/// Largest re-detection budget, windows per lost frame.
+const MAX_WINDOWS_PER_FRAME: usize = 256;
+/// Largest gate threshold, fraction of the reference level.
+const MAX_GATE: f32 = 10.0;
+/// Largest `confidence.half_score`.
+const MAX_HALF_SCORE: f32 = 1e6;
+/// Largest frame count of the state and confidence windows.
+const MAX_FRAMES_KEY: usize = 10_000;
+
+fn unit(v: f32) -> bool {
+    v.is_finite() && (0.0..=1.0).contains(&v)
 }
 
 fn check(
@@ -482,6 +615,97 @@ impl TrackerConfig {
             "[0, 1]",
         )?;
         check(
+            v.gate_low.is_finite() && (0.0..=MAX_GATE).contains(&v.gate_low),
+            "verification.gate_low",
+            v.gate_low,
+            "[0, 10] (fraction of the reference level)",
+        )?;
+        check(
+            v.gate_high.is_finite() && v.gate_high >= v.gate_low && v.gate_high <= MAX_GATE,
+            "verification.gate_high",
+            v.gate_high,
+            "[verification.gate_low, 10]",
+        )?;
+        check(
+            v.max_consecutive_skips <= MAX_FRAMES_KEY,
+            "verification.max_consecutive_skips",
+            v.max_consecutive_skips,
+            "0..=10000 frames",
+        )?;
+        let c = &self.confidence;
+        check(
+            (1..=MAX_FRAMES_KEY).contains(&c.warmup_frames),
+            "confidence.warmup_frames",
+            c.warmup_frames,
+            "1..=10000 frames",
+        )?;
+        check(
+            unit(c.reference_rate),
+            "confidence.reference_rate",
+            c.reference_rate,
+            "[0, 1] per frame",
+        )?;
+        check(
+            c.half_score.is_finite() && c.half_score > 0.0 && c.half_score <= MAX_HALF_SCORE,
+            "confidence.half_score",
+            c.half_score,
+            "(0, 1e6]",
+        )?;
+        check(
+            c.psr_exclusion_cells <= 64,
+            "confidence.psr_exclusion_cells",
+            c.psr_exclusion_cells,
+            "0..=64 cells",
+        )?;
+        let t = &self.track_state;
+        check(
+            unit(t.lost_threshold),
+            "track_state.lost_threshold",
+            t.lost_threshold,
+            "[0, 1]",
+        )?;
+        check(
+            (1..=MAX_FRAMES_KEY).contains(&t.lost_frames),
+            "track_state.lost_frames",
+            t.lost_frames,
+            "1..=10000 frames",
+        )?;
+        let r = &self.redetection;
+        check(
+            (1..=MAX_WINDOWS_PER_FRAME).contains(&r.windows_per_frame),
+            "redetection.windows_per_frame",
+            r.windows_per_frame,
+            "1..=256 windows",
+        )?;
+        check(
+            !r.scales.is_empty()
+                && r.scales.len() <= MAX_REDETECT_SCALES
+                && r.scales
+                    .iter()
+                    .all(|s| s.is_finite() && (0.25..=4.0).contains(s)),
+            "redetection.scales",
+            format!("{:?}", r.scales),
+            "1 to 8 factors in [0.25, 4]",
+        )?;
+        check(
+            r.tile_stride.is_finite() && (0.1..=1.0).contains(&r.tile_stride),
+            "redetection.tile_stride",
+            r.tile_stride,
+            "[0.1, 1] window sides",
+        )?;
+        check(
+            unit(r.reacquire_threshold),
+            "redetection.reacquire_threshold",
+            r.reacquire_threshold,
+            "[0, 1]",
+        )?;
+        check(
+            (1..=MAX_FRAMES_KEY).contains(&r.reacquire_frames),
+            "redetection.reacquire_frames",
+            r.reacquire_frames,
+            "1..=10000 frames",
+        )?;
+        check(
             (1..=256).contains(&self.threads),
             "threads",
             self.threads,
@@ -503,6 +727,32 @@ impl TrackerConfig {
                 threshold_high: v.threshold_high,
                 rate: l.rate,
                 reinforced_rate: l.reinforced_rate,
+            },
+            gate: GateParams {
+                skip_below: v.gate_low,
+                reinforce_from: v.gate_high,
+                rate: l.rate,
+                reinforced_rate: l.reinforced_rate,
+                max_consecutive_skips: v.max_consecutive_skips,
+            },
+            confidence: ConfidenceParams {
+                measure: c.measure,
+                half_score: c.half_score,
+                warmup_frames: c.warmup_frames,
+                reference_rate: c.reference_rate,
+                psr_exclusion: c.psr_exclusion_cells,
+            },
+            states: StateParams {
+                lost_threshold: t.lost_threshold,
+                lost_frames: t.lost_frames,
+            },
+            redetect: RedetectParams {
+                enabled: r.enabled,
+                windows_per_frame: r.windows_per_frame,
+                scales: r.scales.clone(),
+                tile_stride: r.tile_stride,
+                reacquire_threshold: r.reacquire_threshold,
+                reacquire_frames: r.reacquire_frames,
             },
         })
     }
@@ -531,6 +781,42 @@ mod tests {
         let mut c = TrackerConfig::default();
         c.verification.threshold_high = 0.1;
         assert!(matches!(c.validate(), Err(ConfigError::Inconsistent(_))));
+        for (field, edit) in [
+            (
+                "verification.gate_high",
+                (|c: &mut TrackerConfig| c.verification.gate_high = 0.1) as fn(&mut TrackerConfig),
+            ),
+            ("confidence.warmup_frames", |c| {
+                c.confidence.warmup_frames = 0
+            }),
+            ("confidence.reference_rate", |c| {
+                c.confidence.reference_rate = f32::NAN
+            }),
+            ("track_state.lost_frames", |c| c.track_state.lost_frames = 0),
+            ("track_state.lost_threshold", |c| {
+                c.track_state.lost_threshold = 1.5
+            }),
+            ("redetection.windows_per_frame", |c| {
+                c.redetection.windows_per_frame = 0
+            }),
+            ("redetection.scales", |c| c.redetection.scales.clear()),
+            ("redetection.scales", |c| {
+                c.redetection.scales = vec![1.0, 9.0]
+            }),
+            ("redetection.tile_stride", |c| {
+                c.redetection.tile_stride = 0.0
+            }),
+            ("redetection.reacquire_frames", |c| {
+                c.redetection.reacquire_frames = 0
+            }),
+        ] {
+            let mut c = TrackerConfig::default();
+            edit(&mut c);
+            match c.validate() {
+                Err(ConfigError::OutOfRange { field: f, .. }) => assert_eq!(f, field),
+                other => panic!("{field}: {other:?}"),
+            }
+        }
     }
 
     #[test]

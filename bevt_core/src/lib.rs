@@ -37,6 +37,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod confidence;
 pub mod config;
 pub mod error;
 pub mod eval;
@@ -45,7 +46,9 @@ pub mod fft;
 pub mod filter;
 pub mod geometry;
 pub mod image;
+pub mod redetect;
 pub mod scale;
+pub mod track_state;
 pub mod tracker;
 pub mod verify;
 
@@ -53,4 +56,5 @@ pub use config::{TrackerConfig, TrackerSpec};
 pub use error::{ConfigError, TrackError};
 pub use geometry::{BBox, GridSize, Point2, Size2};
 pub use image::{Frame, PixelFormat};
+pub use track_state::{StateReason, TrackState};
 pub use tracker::{BevtTracker, Geometry, TrackOutput, Tracker};

@@ -3,6 +3,9 @@
 //! [`Tracker`] is the interface every driver uses (the ROS node, the `bevt` tool, tests);
 //! [`BevtTracker`] implements ALGORITHM.md §§1–7 on top of the stage modules.
 
+mod lost;
+
+use crate::confidence::{psr, ConfidenceModel, Measures};
 use crate::config::{FeatureKind, TrackerSpec};
 use crate::error::TrackError;
 use crate::features::{FeatureExtractor, FeatureMap, Hog};
@@ -14,7 +17,10 @@ use crate::filter::response::{fused_response, LayerSlot};
 use crate::geometry::{BBox, GridSize, Point2, Size2};
 use crate::image::{Frame, Patch, PixelFormat, Sampler};
 use crate::scale::{scale_factors, scale_limits};
-use crate::verify::{consensus_score, update_ideal, verdict, Verdict};
+use crate::track_state::{StateMachine, StateReason, TrackState};
+use crate::verify::{
+    consensus_score, update_ideal, verdict, LearningGate, Verdict, VerificationScore,
+};
 use rustfft::num_complex::Complex32;
 use serde::{Deserialize, Serialize};
 
@@ -39,6 +45,12 @@ pub struct TrackOutput {
     pub peak: f32,
     /// Current target scale relative to the initial box.
     pub scale: f32,
+    /// Confidence in `[0, 1]` that the box is on the target (see [`crate::confidence`]).
+    pub confidence: f32,
+    /// Track state after this frame.
+    pub state: TrackState,
+    /// Why the track is in `state`; prints as a sentence (empty when tracking normally).
+    pub reason: StateReason,
 }
 
 /// The interface shared by every tracker driver.
@@ -267,6 +279,10 @@ struct State {
     scale: f32,
     min_scale: f32,
     max_scale: f32,
+    confidence: ConfidenceModel,
+    gate: LearningGate,
+    states: StateMachine,
+    lost: lost::LostState,
 }
 
 impl State {
@@ -533,20 +549,33 @@ impl BevtTracker {
             frame_h: frame.height(),
             format: frame.format(),
             geo,
+            confidence: ConfidenceModel::new(spec.confidence, 0.0),
+            gate: LearningGate::new(spec.gate),
+            states: StateMachine::new(spec.states),
+            lost: lost::LostState::default(),
         }))
     }
 
-    fn output(st: &State, consensus: f32, learned: bool, peak: f32) -> TrackOutput {
+    fn output_at(
+        st: &State,
+        pos: Point2,
+        scale: f32,
+        (consensus, learned, peak): (f32, bool, f32),
+        (confidence, state, reason): (f32, TrackState, StateReason),
+    ) -> TrackOutput {
         let size = Size2 {
-            w: (st.geo.base_target.w * st.scale).floor().max(1.0),
-            h: (st.geo.base_target.h * st.scale).floor().max(1.0),
+            w: (st.geo.base_target.w * scale).floor().max(1.0),
+            h: (st.geo.base_target.h * scale).floor().max(1.0),
         };
         TrackOutput {
-            bbox: BBox::from_center(st.pos, size),
+            bbox: BBox::from_center(pos, size),
             consensus,
             learned,
             peak,
-            scale: st.scale / st.geo.s0,
+            scale: scale / st.geo.s0,
+            confidence,
+            state,
+            reason,
         }
     }
 
@@ -619,6 +648,8 @@ impl Tracker for BevtTracker {
         st.model_xf.copy_from_slice(&st.workers[0].xf);
         st.train();
         st.ideal_response();
+        let initial_peak = st.m_ideal.iter().copied().fold(0.0f32, f32::max);
+        st.confidence = ConfidenceModel::new(self.spec.confidence, initial_peak);
         self.state = Some(st);
         Ok(())
     }
@@ -634,6 +665,9 @@ impl Tracker for BevtTracker {
                 expected: format!("{}x{} {}", st.frame_w, st.frame_h, st.format.name()),
                 got: frame.describe(),
             });
+        }
+        if st.states.state() == TrackState::Lost {
+            return lost::search(st, frame, &self.spec);
         }
         // Detection over all scales around the previous position.
         let side = st.geo.patch_side as f32;
@@ -682,13 +716,45 @@ impl Tracker for BevtTracker {
             vcfg.norm,
             &mut st.norm_scratch,
         );
-        let v = if vcfg.enabled {
-            verdict(c, &self.spec.verify)
-        } else {
+        let measures = Measures {
+            peak: peak.score,
+            psr: psr(
+                &st.workers[best].resp,
+                st.geo.grid,
+                self.spec.confidence.psr_exclusion,
+            ),
+        };
+        let score = st.confidence.score(measures);
+        let confidence = st.confidence.confidence(score);
+        let relative = st.confidence.relative(score);
+        let warming_up = st.confidence.warming_up();
+        let before = st.states.state();
+        let (state, reason) = st.states.track(confidence);
+        let was_confident = matches!(before, TrackState::Tracking | TrackState::Reacquired);
+        if state != TrackState::Tracking && was_confident {
+            lost::snapshot(st);
+        }
+        if state == TrackState::Lost {
+            lost::enter(st, &self.spec);
+            return Ok(Self::output_at(
+                st,
+                st.pos,
+                st.scale,
+                (c, false, peak.score),
+                (confidence, state, reason),
+            ));
+        }
+        let v = if !vcfg.enabled {
             Verdict::Learn {
                 rate: cfg.learning.rate,
             }
+        } else {
+            match vcfg.score {
+                VerificationScore::Reference => verdict(c, &self.spec.verify),
+                VerificationScore::Confidence => st.gate.decide(relative, warming_up),
+            }
         };
+        st.confidence.observe(score);
         let learned = match v {
             Verdict::Skip => false,
             Verdict::Learn { rate } => {
@@ -701,7 +767,14 @@ impl Tracker for BevtTracker {
                 true
             }
         };
-        Ok(Self::output(st, c, learned, peak.score))
+        let (pos, scale) = (st.pos, st.scale);
+        Ok(Self::output_at(
+            st,
+            pos,
+            scale,
+            (c, learned, peak.score),
+            (confidence, state, reason),
+        ))
     }
 
     fn reset(&mut self) {

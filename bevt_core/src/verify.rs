@@ -36,6 +36,16 @@ pub enum Verdict {
     },
 }
 
+/// Which score drives the learning decision.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum VerificationScore {
+    /// The reference consensus `C` with `threshold_low`/`threshold_high` (paper fidelity).
+    Reference,
+    /// The per-frame confidence of [`crate::confidence`] through a [`LearningGate`].
+    Confidence,
+}
+
 /// Verification thresholds and rates.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VerifyParams {
@@ -125,6 +135,79 @@ pub fn verdict(c: f32, p: &VerifyParams) -> Verdict {
     }
 }
 
+/// Parameters of the [`LearningGate`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GateParams {
+    /// Relative score below this: skip learning.
+    pub skip_below: f32,
+    /// Relative score at or above this: reinforced learning.
+    pub reinforce_from: f32,
+    /// Normal rate.
+    pub rate: f32,
+    /// Reinforced rate.
+    pub reinforced_rate: f32,
+    /// Skipped frames in a row after which the next frame is learned at the normal rate
+    /// whatever its confidence, so verification cannot lock the tracker out of learning.
+    pub max_consecutive_skips: usize,
+}
+
+/// Skip / normal / reinforced learning driven by the score relative to its running level
+/// ([`crate::confidence::ConfidenceModel::relative`]), with a warm-up (always the
+/// reinforced rate, which is what the reference does on every HOG frame) and a bound on
+/// consecutive skips.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LearningGate {
+    params: GateParams,
+    skipped_in_a_row: usize,
+}
+
+impl LearningGate {
+    /// A gate that has skipped nothing yet.
+    pub fn new(params: GateParams) -> Self {
+        Self {
+            params,
+            skipped_in_a_row: 0,
+        }
+    }
+
+    /// Frames skipped in a row so far.
+    pub fn skipped_in_a_row(&self) -> usize {
+        self.skipped_in_a_row
+    }
+
+    /// The decision for a frame of relative score `confidence` (non-finite counts as 0).
+    pub fn decide(&mut self, confidence: f32, warming_up: bool) -> Verdict {
+        let p = self.params;
+        let c = if confidence.is_finite() {
+            confidence
+        } else {
+            0.0
+        };
+        let v = if warming_up {
+            Verdict::Learn {
+                rate: p.reinforced_rate,
+            }
+        } else if c < p.skip_below {
+            if self.skipped_in_a_row >= p.max_consecutive_skips {
+                Verdict::Learn { rate: p.rate }
+            } else {
+                Verdict::Skip
+            }
+        } else if c >= p.reinforce_from {
+            Verdict::Learn {
+                rate: p.reinforced_rate,
+            }
+        } else {
+            Verdict::Learn { rate: p.rate }
+        };
+        self.skipped_in_a_row = match v {
+            Verdict::Skip => self.skipped_in_a_row.saturating_add(1),
+            Verdict::Learn { .. } => 0,
+        };
+        v
+    }
+}
+
 /// `m_ideal ← (1 − γ)·m_ideal + γ·m_curr`.
 pub fn update_ideal(m_ideal: &mut [f32], m_curr: &[f32], gamma: f32) {
     for (a, b) in m_ideal.iter_mut().zip(m_curr) {
@@ -188,5 +271,47 @@ mod tests {
         assert_eq!(verdict(0.3, &p), Verdict::Learn { rate: 0.013 });
         assert_eq!(verdict(0.5, &p), Verdict::Learn { rate: 0.019 });
         assert_eq!(verdict(f32::NAN, &p), Verdict::Skip);
+    }
+
+    fn gate(max: usize) -> LearningGate {
+        LearningGate::new(GateParams {
+            skip_below: 0.3,
+            reinforce_from: 0.8,
+            rate: 0.013,
+            reinforced_rate: 0.019,
+            max_consecutive_skips: max,
+        })
+    }
+
+    #[test]
+    fn gate_skips_learns_and_reinforces_by_confidence_and_learns_in_warmup() {
+        let mut g = gate(5);
+        assert_eq!(g.decide(0.0, true), Verdict::Learn { rate: 0.019 });
+        assert_eq!(g.decide(0.1, false), Verdict::Skip);
+        assert_eq!(g.decide(f32::NAN, false), Verdict::Skip);
+        assert_eq!(g.skipped_in_a_row(), 2);
+        assert_eq!(g.decide(0.5, false), Verdict::Learn { rate: 0.013 });
+        assert_eq!(g.skipped_in_a_row(), 0);
+        assert_eq!(g.decide(0.8, false), Verdict::Learn { rate: 0.019 });
+    }
+
+    #[test]
+    fn gate_never_skips_more_than_its_bound_in_a_row() {
+        for max in [0, 1, 3, 10] {
+            let mut g = gate(max);
+            let mut run = 0;
+            let mut longest = 0;
+            for _ in 0..100 {
+                match g.decide(0.01, false) {
+                    Verdict::Skip => run += 1,
+                    Verdict::Learn { rate } => {
+                        assert_eq!(rate, 0.013);
+                        run = 0;
+                    }
+                }
+                longest = longest.max(run);
+            }
+            assert_eq!(longest, max, "bound {max}");
+        }
     }
 }

@@ -519,6 +519,9 @@ impl NodeCore {
             learned: true,
             peak: 0.0,
             scale: 1.0,
+            confidence: 1.0,
+            state: bevt_core::TrackState::Tracking,
+            reason: bevt_core::StateReason::Confident,
         });
         self.last_output = Some(out);
         self.state = TrackStatus::STATE_TRACKING;

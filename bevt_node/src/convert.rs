@@ -694,6 +694,9 @@ mod tests {
             learned: true,
             peak: 0.1,
             scale: 1.0,
+            confidence: 0.9,
+            state: bevt_core::TrackState::Tracking,
+            reason: bevt_core::StateReason::Confident,
         };
         let d = detections_from_output(&Header::default(), Some(&out), 3, "target");
         assert_eq!(d.detections.len(), 1);

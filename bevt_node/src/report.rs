@@ -6,8 +6,9 @@
 
 use crate::dataset::{format_annotation_row, parse_annotation, Dataset};
 use crate::runner::SequenceRun;
+use bevt_core::eval::lost::{label_frames, reacquire_frames, score_lost, FrameLabel, LostScores};
 use bevt_core::eval::metrics::{mean_curve, score_sequence, SequenceScores};
-use bevt_core::BBox;
+use bevt_core::{BBox, TrackState};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -46,6 +47,14 @@ pub struct SequenceSummary {
     pub skipped: usize,
     /// Mean consensus score over updates.
     pub mean_consensus: f64,
+    /// Confidence ROC-AUC and lost-state precision/recall (README "Confidence and lost
+    /// state"); absent without ground truth.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lost: Option<LostScores>,
+    /// Frames to re-acquire after each reappearance of the target (`null`: never).
+    pub reacquire_frames: Vec<Option<usize>>,
+    #[serde(skip)]
+    labels: Vec<FrameLabel>,
     #[serde(skip)]
     scores: Option<SequenceScores>,
     #[serde(skip)]
@@ -65,6 +74,19 @@ pub struct Overall {
     pub auc: f64,
     /// Mean success at IoU 0.5.
     pub success_50: f64,
+    /// Confidence ROC-AUC and lost-state precision/recall over the frames of all averaged
+    /// sequences pooled (our tracker only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lost: Option<LostScores>,
+    /// Reappearances of the target after an absence (our tracker only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reappearances: Option<usize>,
+    /// Reappearances after which the target was tracked again (our tracker only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reacquired: Option<usize>,
+    /// Mean frames to re-acquire over those reappearances (our tracker only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reacquire_frames_mean: Option<f64>,
     /// Mean of per-sequence fps (our tracker only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fps_mean: Option<f64>,
@@ -140,6 +162,8 @@ pub fn summarize_run(r: &SequenceRun) -> SequenceSummary {
         .map(|o| o.consensus as f64)
         .collect();
     let s = scores.clone().unwrap_or_else(|| score_sequence(&[], &[]));
+    let states = state_rows(r);
+    let labels = label_frames(&states, &r.truth);
     SequenceSummary {
         name: r.name.clone(),
         status: if ok { "ok" } else { "failed" },
@@ -158,9 +182,21 @@ pub fn summarize_run(r: &SequenceRun) -> SequenceSummary {
         } else {
             cons.iter().sum::<f64>() / cons.len() as f64
         },
+        lost: (!r.truth.is_empty()).then(|| score_lost(&labels)),
+        reacquire_frames: reacquire_frames(&states, &r.truth),
+        labels,
         scores: ok.then_some(scores).flatten(),
         seconds: r.run.track_seconds,
     }
+}
+
+/// `(box, confidence, state)` per processed frame (`None` for the init frame and before).
+fn state_rows(r: &SequenceRun) -> Vec<Option<(BBox, f32, TrackState)>> {
+    r.run
+        .outputs
+        .iter()
+        .map(|o| o.map(|o| (o.bbox, o.confidence, o.state)))
+        .collect()
 }
 
 fn overall_of(scores: &[&SequenceScores]) -> Overall {
@@ -176,6 +212,10 @@ fn overall_of(scores: &[&SequenceScores]) -> Overall {
         precision_20: scores.iter().map(|s| s.precision_20).sum::<f64>() / n,
         auc: scores.iter().map(|s| s.auc).sum::<f64>() / n,
         success_50: scores.iter().map(|s| s.success_50).sum::<f64>() / n,
+        lost: None,
+        reappearances: None,
+        reacquired: None,
+        reacquire_frames_mean: None,
         fps_mean: None,
         fps_pooled: None,
         precision_curve: mean_curve(&pc),
@@ -196,6 +236,17 @@ pub fn build_summary(
     let scored: Vec<&SequenceScores> = done.iter().filter_map(|r| r.scores.as_ref()).collect();
     let mut overall = overall_of(&scored);
     overall.failed = runs.len() - done.len();
+    let pooled: Vec<FrameLabel> = done.iter().flat_map(|r| r.labels.clone()).collect();
+    overall.lost = Some(score_lost(&pooled));
+    let re: Vec<Option<usize>> = done
+        .iter()
+        .flat_map(|r| r.reacquire_frames.clone())
+        .collect();
+    let found: Vec<usize> = re.iter().flatten().copied().collect();
+    overall.reappearances = Some(re.len());
+    overall.reacquired = Some(found.len());
+    overall.reacquire_frames_mean =
+        (!found.is_empty()).then(|| found.iter().sum::<usize>() as f64 / found.len() as f64);
     if !done.is_empty() {
         overall.fps_mean = Some(done.iter().map(|r| r.fps).sum::<f64>() / done.len() as f64);
         let secs: f64 = done.iter().map(|r| r.seconds).sum();
@@ -308,7 +359,35 @@ pub fn write_result_file(out: &Path, run: &SequenceRun) -> std::io::Result<()> {
         s.push_str(&format_annotation_row(b.as_ref()));
         s.push('\n');
     }
-    std::fs::write(out.join(format!("{}.txt", run.name)), s)
+    std::fs::write(out.join(format!("{}.txt", run.name)), s)?;
+    write_state_file(out, run)
+}
+
+/// Writes `<out>/<name>.state.csv`: `frame,confidence,state` per frame (1-based frame
+/// numbers as in the annotation; empty confidence and state `init`/`none` for the init
+/// frame and the frames before it).
+///
+/// # Errors
+/// I/O errors.
+pub fn write_state_file(out: &Path, run: &SequenceRun) -> std::io::Result<()> {
+    let mut s = String::from("frame,confidence,state\n");
+    let first = run.run.boxes.iter().position(Option::is_some);
+    for (i, o) in run.run.outputs.iter().enumerate() {
+        let _ = match o {
+            Some(o) => writeln!(s, "{},{:.4},{}", i + 1, o.confidence, o.state.name()),
+            None if Some(i) == first => writeln!(s, "{},,init", i + 1),
+            None => writeln!(s, "{},,none", i + 1),
+        };
+    }
+    std::fs::write(out.join(format!("{}.state.csv", run.name)), s)
+}
+
+fn fmt_opt(v: f64, width: usize) -> String {
+    if v.is_finite() {
+        format!("{v:>width$.3}")
+    } else {
+        format!("{:>width$}", "-")
+    }
 }
 
 /// Writes `summary.json`.
@@ -325,13 +404,38 @@ pub fn console_table(s: &Summary) -> String {
     let mut t = String::new();
     let _ = writeln!(
         t,
-        "{:<14} {:>6} {:>7} {:>6} {:>7} {:>8} {:>8}  status",
-        "sequence", "frames", "P@20", "AUC", "fps", "learned", "skipped"
+        "{:<14} {:>6} {:>7} {:>6} {:>7} {:>8} {:>8} {:>7} {:>7} {:>7} {:>9}  status",
+        "sequence",
+        "frames",
+        "P@20",
+        "AUC",
+        "fps",
+        "learned",
+        "skipped",
+        "confAUC",
+        "lostP",
+        "lostR",
+        "reacq"
     );
+    let lost_cells = |l: Option<&LostScores>| {
+        l.map_or(format!("{:>7} {:>7} {:>7}", "-", "-", "-"), |l| {
+            format!(
+                "{} {} {}",
+                fmt_opt(l.confidence_auc, 7),
+                fmt_opt(l.lost_precision, 7),
+                fmt_opt(l.lost_recall, 7)
+            )
+        })
+    };
     for r in &s.sequences {
+        let reacq: Vec<String> = r
+            .reacquire_frames
+            .iter()
+            .map(|f| f.map_or("never".to_string(), |f| f.to_string()))
+            .collect();
         let _ = writeln!(
             t,
-            "{:<14} {:>6} {:>7.3} {:>6.3} {:>7.1} {:>8} {:>8}  {}",
+            "{:<14} {:>6} {:>7.3} {:>6.3} {:>7.1} {:>8} {:>8} {} {:>9}  {}",
             r.name,
             r.frames,
             r.precision_20,
@@ -339,6 +443,12 @@ pub fn console_table(s: &Summary) -> String {
             r.fps,
             r.learned,
             r.skipped,
+            lost_cells(r.lost.as_ref()),
+            if reacq.is_empty() {
+                "-".to_string()
+            } else {
+                reacq.join(",")
+            },
             r.error
                 .as_deref()
                 .map_or("ok".to_string(), |e| format!("FAILED: {e}"))
@@ -357,6 +467,22 @@ pub fn console_table(s: &Summary) -> String {
         o.failed,
         o.fps_pooled.unwrap_or(0.0)
     );
+    if let Some(l) = &o.lost {
+        let _ = writeln!(
+            t,
+            "confidence ROC-AUC {} (good {} / bad {} frames, pooled); lost state precision {} recall {} ({} lost frames); re-acquired {}/{} reappearances, mean {} frames",
+            fmt_opt(l.confidence_auc, 0),
+            l.good_frames,
+            l.bad_frames,
+            fmt_opt(l.lost_precision, 0),
+            fmt_opt(l.lost_recall, 0),
+            l.lost_frames,
+            o.reacquired.unwrap_or(0),
+            o.reappearances.unwrap_or(0),
+            o.reacquire_frames_mean
+                .map_or("-".to_string(), |m| format!("{m:.1}"))
+        );
+    }
     if !s.compare.is_empty() {
         let _ = writeln!(
             t,

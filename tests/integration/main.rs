@@ -6,6 +6,7 @@ mod bad_input;
 mod cnn;
 mod dds_hardening;
 mod interop;
+mod lost;
 mod node;
 mod node_limits;
 mod real_data;

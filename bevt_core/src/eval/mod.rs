@@ -1,4 +1,5 @@
 //! Evaluation helpers: OPE metrics and synthetic sequences with ground truth.
 
+pub mod lost;
 pub mod metrics;
 pub mod synth;

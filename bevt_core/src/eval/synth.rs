@@ -25,6 +25,22 @@ pub struct SynthParams {
     pub camera_velocity: (f32, f32),
     /// Texture seed.
     pub seed: u32,
+    /// Frames `[start, end)` in which the target is not drawn (occluded or out of view).
+    pub hidden: Option<(usize, usize)>,
+    /// Shift of the target's path from the end of `hidden` on, pixels (x, y): it
+    /// reappears elsewhere.
+    pub reappear_offset: (f32, f32),
+    /// A look-alike drawn while the target is hidden.
+    pub distractor: Option<Distractor>,
+}
+
+/// An object drawn like the target (same size, rim and colours) while it is hidden.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Distractor {
+    /// Centre, pixels (x, y).
+    pub center: (f32, f32),
+    /// Texture seed of its inside (the target's `seed` makes an exact copy).
+    pub seed: u32,
 }
 
 impl Default for SynthParams {
@@ -38,6 +54,9 @@ impl Default for SynthParams {
             path_amplitude: (60.0, 40.0),
             camera_velocity: (1.5, -0.8),
             seed: 7,
+            hidden: None,
+            reappear_offset: (0.0, 0.0),
+            distractor: None,
         }
     }
 }
@@ -47,8 +66,10 @@ impl Default for SynthParams {
 pub struct SynthFrame {
     /// `width × height × 3` bytes, row-major RGB.
     pub rgb: Vec<u8>,
-    /// Ground-truth box.
+    /// Ground-truth box (where the target is, drawn or not).
     pub truth: BBox,
+    /// The target is drawn in this frame.
+    pub visible: bool,
 }
 
 /// Width of the target's dark rim as a fraction of its smaller side.
@@ -89,8 +110,12 @@ impl SynthParams {
         let s = self.scale_rate.powf(tf);
         let (w, h) = (self.target.0 * s, self.target.1 * s);
         let phase = tf * 0.06;
-        let cx = self.width as f32 / 2.0 + self.path_amplitude.0 * phase.sin();
-        let cy = self.height as f32 / 2.0 + self.path_amplitude.1 * (1.0 - phase.cos());
+        let (ox, oy) = match self.hidden {
+            Some((_, end)) if t >= end => self.reappear_offset,
+            _ => (0.0, 0.0),
+        };
+        let cx = self.width as f32 / 2.0 + self.path_amplitude.0 * phase.sin() + ox;
+        let cy = self.height as f32 / 2.0 + self.path_amplitude.1 * (1.0 - phase.cos()) + oy;
         BBox::new(
             cx - w / 2.0,
             cy - h / 2.0 - self.path_amplitude.1 / 2.0,
@@ -99,9 +124,31 @@ impl SynthParams {
         )
     }
 
+    /// True when the target is drawn in frame `t`.
+    pub fn visible(&self, t: usize) -> bool {
+        !matches!(self.hidden, Some((a, b)) if (a..b).contains(&t))
+    }
+
     /// Renders frame `t`.
     pub fn frame(&self, t: usize) -> SynthFrame {
         let truth = self.truth(t);
+        let visible = self.visible(t);
+        // What is drawn as "the target" this frame: the target, a distractor, or nothing.
+        let drawn = if visible {
+            Some((truth, self.seed))
+        } else {
+            self.distractor.map(|d| {
+                (
+                    BBox::new(
+                        d.center.0 - truth.w / 2.0,
+                        d.center.1 - truth.h / 2.0,
+                        truth.w,
+                        truth.h,
+                    ),
+                    d.seed,
+                )
+            })
+        };
         let (cam_x, cam_y) = (
             self.camera_velocity.0 * t as f32,
             self.camera_velocity.1 * t as f32,
@@ -111,12 +158,10 @@ impl SynthParams {
         for y in 0..self.height {
             for x in 0..self.width {
                 let (xf, yf) = (x as f32 + 0.5, y as f32 + 0.5);
-                let inside = xf >= truth.x
-                    && xf < truth.x + truth.w
-                    && yf >= truth.y
-                    && yf < truth.y + truth.h;
+                let inside = drawn
+                    .filter(|(b, _)| xf >= b.x && xf < b.x + b.w && yf >= b.y && yf < b.y + b.h);
                 let px = &mut rgb[(y * self.width + x) * 3..][..3];
-                if inside {
+                if let Some((truth, seed)) = inside {
                     // Target texture in its own (scaled) coordinates: moves and scales with it.
                     let (u, v) = ((xf - truth.x) / s, (yf - truth.y) / s);
                     // A dark rim (like a vehicle's outline) plus internal texture.
@@ -125,7 +170,7 @@ impl SynthParams {
                     let t0 = if rim {
                         0.0
                     } else {
-                        texture(u * 0.7, v * 0.7, self.seed + 100)
+                        texture(u * 0.7, v * 0.7, seed + 100)
                     };
                     px[0] = (60.0 + 190.0 * t0) as u8;
                     px[1] = (30.0 + 120.0 * (1.0 - t0)) as u8;
@@ -139,7 +184,11 @@ impl SynthParams {
                 }
             }
         }
-        SynthFrame { rgb, truth }
+        SynthFrame {
+            rgb,
+            truth,
+            visible,
+        }
     }
 }
 
@@ -161,6 +210,31 @@ mod tests {
             .sum::<f64>()
             / a.rgb.len() as f64;
         assert!(var > 100.0, "{var}");
+    }
+
+    #[test]
+    fn hidden_target_is_not_drawn_and_reappears_shifted() {
+        let p = SynthParams {
+            hidden: Some((5, 8)),
+            reappear_offset: (50.0, 0.0),
+            ..SynthParams::default()
+        };
+        let plain = SynthParams::default();
+        assert!(p.visible(4) && !p.visible(5) && !p.visible(7) && p.visible(8));
+        assert_eq!(p.frame(4).rgb, plain.frame(4).rgb);
+        assert_ne!(p.frame(6).rgb, plain.frame(6).rgb);
+        assert!(!p.frame(6).visible);
+        assert_eq!(p.truth(6), plain.truth(6));
+        assert!((p.truth(8).x - plain.truth(8).x - 50.0).abs() < 1e-3);
+        let d = SynthParams {
+            distractor: Some(Distractor {
+                center: (60.0, 60.0),
+                seed: 99,
+            }),
+            ..p.clone()
+        };
+        assert_ne!(d.frame(6).rgb, p.frame(6).rgb);
+        assert_eq!(d.frame(8).rgb, p.frame(8).rgb);
     }
 
     #[test]

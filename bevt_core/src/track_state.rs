@@ -1,0 +1,228 @@
+//! Track state: tracking → uncertain → lost → re-acquired → tracking.
+//!
+//! ```text
+//!            confidence < lost_threshold           … for lost_frames frames in a row
+//! Tracking ───────────────────────────▶ Uncertain ─────────────────────────────▶ Lost
+//!    ▲  ◀──────────────────────────────────┘                                      │
+//!    │        confidence ≥ lost_threshold                                          │
+//!    │                          a re-detection candidate confident for            │
+//!    └──────── Reacquired ◀──── reacquire_frames frames in a row ◀────────────────┘
+//! ```
+//!
+//! [`TrackState::Reacquired`] is
+//! reported on the one frame the track is taken back; the next frame is `Tracking` or
+//! `Uncertain` again. Each state comes with a [`StateReason`] that prints as the operator
+//! reads it ("target lost: confidence 0.08 below 0.25 for 10 frames").
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// The state of the track after one frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrackState {
+    /// Confident of the target.
+    Tracking,
+    /// Below the confidence threshold for fewer than `lost_frames` frames: the box is
+    /// still the tracker's best guess.
+    Uncertain,
+    /// The target is lost; the box is the last known one (or the current re-detection
+    /// candidate) and must not be used.
+    Lost,
+    /// The target was found again on this frame after being lost.
+    Reacquired,
+}
+
+impl TrackState {
+    /// Lower-case name, as in result files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Tracking => "tracking",
+            Self::Uncertain => "uncertain",
+            Self::Lost => "lost",
+            Self::Reacquired => "reacquired",
+        }
+    }
+}
+
+/// Why the track is in its state.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StateReason {
+    /// Tracking normally.
+    Confident,
+    /// Confidence below the threshold, not yet for long enough to drop the track.
+    LowConfidence {
+        /// This frame's confidence.
+        confidence: f32,
+        /// The threshold.
+        threshold: f32,
+        /// Consecutive frames below it.
+        frames: usize,
+    },
+    /// Lost: below the threshold for `frames` frames (the best re-detection candidate's
+    /// confidence while searching).
+    Lost {
+        /// This frame's (best) confidence.
+        confidence: f32,
+        /// The threshold.
+        threshold: f32,
+        /// Consecutive frames below it, the search included.
+        frames: usize,
+    },
+    /// Found again after `after` lost frames.
+    Reacquired {
+        /// Frames spent lost.
+        after: usize,
+    },
+}
+
+impl fmt::Display for StateReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::Confident => Ok(()),
+            Self::LowConfidence {
+                confidence,
+                threshold,
+                frames,
+            } => write!(
+                f,
+                "low confidence: {confidence:.2} below {threshold:.2} for {frames} frames"
+            ),
+            Self::Lost {
+                confidence,
+                threshold,
+                frames,
+            } => write!(
+                f,
+                "target lost: confidence {confidence:.2} below {threshold:.2} for {frames} frames"
+            ),
+            Self::Reacquired { after } => write!(f, "re-acquired after {after} frames"),
+        }
+    }
+}
+
+/// Thresholds of the state machine.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StateParams {
+    /// Confidence below this is unconfident.
+    pub lost_threshold: f32,
+    /// Unconfident frames in a row that make the target lost.
+    pub lost_frames: usize,
+}
+
+/// The state machine (the re-detection decides when a lost target is found again).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StateMachine {
+    params: StateParams,
+    state: TrackState,
+    below: usize,
+    lost_for: usize,
+}
+
+impl StateMachine {
+    /// Starts in [`TrackState::Tracking`].
+    pub fn new(params: StateParams) -> Self {
+        Self {
+            params,
+            state: TrackState::Tracking,
+            below: 0,
+            lost_for: 0,
+        }
+    }
+
+    /// The current state.
+    pub fn state(&self) -> TrackState {
+        self.state
+    }
+
+    /// Frames spent lost so far (0 unless lost).
+    pub fn lost_for(&self) -> usize {
+        self.lost_for
+    }
+
+    /// One frame tracked normally with `confidence`; returns the new state and its reason.
+    /// Must not be called while lost (use [`Self::searching`]).
+    pub fn track(&mut self, confidence: f32) -> (TrackState, StateReason) {
+        let p = self.params;
+        if confidence >= p.lost_threshold {
+            self.below = 0;
+            self.state = TrackState::Tracking;
+            return (self.state, StateReason::Confident);
+        }
+        self.below = self.below.saturating_add(1);
+        if self.below >= p.lost_frames {
+            self.state = TrackState::Lost;
+            self.lost_for = 0;
+            (self.state, self.lost_reason(confidence))
+        } else {
+            self.state = TrackState::Uncertain;
+            (
+                self.state,
+                StateReason::LowConfidence {
+                    confidence,
+                    threshold: p.lost_threshold,
+                    frames: self.below,
+                },
+            )
+        }
+    }
+
+    /// One lost frame searched without success; `confidence` is the best candidate's.
+    pub fn searching(&mut self, confidence: f32) -> (TrackState, StateReason) {
+        self.below = self.below.saturating_add(1);
+        self.lost_for = self.lost_for.saturating_add(1);
+        self.state = TrackState::Lost;
+        (self.state, self.lost_reason(confidence))
+    }
+
+    /// The search confirmed the target on this frame.
+    pub fn reacquired(&mut self) -> (TrackState, StateReason) {
+        let after = self.lost_for.saturating_add(1);
+        self.below = 0;
+        self.lost_for = 0;
+        self.state = TrackState::Reacquired;
+        (self.state, StateReason::Reacquired { after })
+    }
+
+    fn lost_reason(&self, confidence: f32) -> StateReason {
+        StateReason::Lost {
+            confidence,
+            threshold: self.params.lost_threshold,
+            frames: self.below,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn walks_tracking_uncertain_lost_reacquired_tracking() {
+        let mut m = StateMachine::new(StateParams {
+            lost_threshold: 0.25,
+            lost_frames: 3,
+        });
+        assert_eq!(m.track(0.9).0, TrackState::Tracking);
+        assert_eq!(m.track(0.1).0, TrackState::Uncertain);
+        assert_eq!(m.track(0.9).0, TrackState::Tracking);
+        assert_eq!(m.track(0.1).0, TrackState::Uncertain);
+        assert_eq!(m.track(0.1).0, TrackState::Uncertain);
+        let (s, r) = m.track(0.08);
+        assert_eq!(s, TrackState::Lost);
+        assert_eq!(
+            r.to_string(),
+            "target lost: confidence 0.08 below 0.25 for 3 frames"
+        );
+        for _ in 0..30 {
+            assert_eq!(m.searching(0.1).0, TrackState::Lost);
+        }
+        assert_eq!(m.lost_for(), 30);
+        let (s, r) = m.reacquired();
+        assert_eq!(s, TrackState::Reacquired);
+        assert_eq!(r.to_string(), "re-acquired after 31 frames");
+        assert_eq!(m.track(0.9).0, TrackState::Tracking);
+        assert_eq!(StateReason::Confident.to_string(), "");
+    }
+}

@@ -1,0 +1,187 @@
+//! The lost state of [`super::BevtTracker`]: the model frozen at the last confident frame,
+//! and the bounded re-detection search of [`crate::redetect`] on every lost frame.
+
+use super::{BevtTracker, State};
+use crate::confidence::{psr, Measures};
+use crate::config::TrackerSpec;
+use crate::error::TrackError;
+use crate::geometry::Point2;
+use crate::image::Frame;
+use crate::redetect::{CandidateTracker, SearchPlan};
+use crate::tracker::TrackOutput;
+use rustfft::num_complex::Complex32;
+
+/// A search result within this many cells of the candidate is the candidate.
+const CANDIDATE_NEAR_CELLS: f32 = 3.0;
+/// Consensus reported while lost (no response is compared with the ideal model).
+const LOST_CONSENSUS: f32 = 0.0;
+
+/// What the tracker keeps for, and while, being lost.
+#[derive(Debug, Default)]
+pub(super) struct LostState {
+    /// Filter, appearance model and ideal response of the last confident frame.
+    g_f: Vec<Complex32>,
+    model_xf: Vec<Complex32>,
+    m_ideal: Vec<f32>,
+    pos: Point2,
+    scale: f32,
+    saved: bool,
+    /// The search.
+    plan: SearchPlan,
+    candidates: CandidateTracker,
+    scale_at_loss: f32,
+}
+
+/// Saves the model before the first unconfident frame can be learned.
+pub(super) fn snapshot(st: &mut State) {
+    let l = &mut st.lost;
+    l.g_f.clone_from(&st.g_f);
+    l.model_xf.clone_from(&st.model_xf);
+    l.m_ideal.clone_from(&st.m_ideal);
+    l.pos = st.pos;
+    l.scale = st.scale;
+    l.saved = true;
+}
+
+/// Enters the lost state: restores the last confident model and position, plans the search.
+pub(super) fn enter(st: &mut State, spec: &TrackerSpec) {
+    let l = &mut st.lost;
+    if l.saved {
+        std::mem::swap(&mut st.g_f, &mut l.g_f);
+        std::mem::swap(&mut st.model_xf, &mut l.model_xf);
+        std::mem::swap(&mut st.m_ideal, &mut l.m_ideal);
+        st.pos = l.pos;
+        st.scale = l.scale;
+        l.saved = false;
+    }
+    l.scale_at_loss = st.scale;
+    l.candidates.clear();
+    l.plan = SearchPlan::new(
+        st.pos,
+        st.frame_w,
+        st.frame_h,
+        st.geo.patch_side as f32 * st.scale,
+        &spec.redetect,
+    );
+}
+
+/// One search window at `center` and absolute `scale`: the position the frozen filter
+/// points to and its confidence.
+fn evaluate(
+    st: &mut State,
+    frame: &Frame<'_>,
+    center: Point2,
+    scale: f32,
+    spec: &TrackerSpec,
+) -> Result<(Point2, f32, f32), TrackError> {
+    let side = st.geo.patch_side;
+    let region = side as f32 * scale;
+    st.sampler.prepare(frame, center, region, region, side);
+    let State {
+        workers,
+        sampler,
+        window,
+        g_f,
+        layers,
+        geo,
+        ..
+    } = st;
+    let w = &mut workers[0];
+    w.detect(
+        sampler,
+        center,
+        region,
+        geo.cell,
+        window,
+        g_f,
+        layers,
+        spec.config.detection.newton_iterations,
+    )?;
+    let step = geo.cell as f32 * scale;
+    let pos = Point2 {
+        x: (center.x + w.peak.dx * step).clamp(0.0, st.frame_w as f32),
+        y: (center.y + w.peak.dy * step).clamp(0.0, st.frame_h as f32),
+    };
+    let m = Measures {
+        peak: w.peak.score,
+        psr: psr(&w.resp, geo.grid, spec.confidence.psr_exclusion),
+    };
+    let pos = if pos.x.is_finite() && pos.y.is_finite() {
+        pos
+    } else {
+        center
+    };
+    let c = st.confidence.confidence(st.confidence.score(m));
+    Ok((pos, c, w.peak.score))
+}
+
+/// One lost frame: follow the candidate, spend the rest of the budget on the plan, take the
+/// track back once a candidate has been confident for long enough.
+pub(super) fn search(
+    st: &mut State,
+    frame: &Frame<'_>,
+    spec: &TrackerSpec,
+) -> Result<TrackOutput, TrackError> {
+    let p = &spec.redetect;
+    let threshold = p.reacquire_threshold;
+    let near = st.geo.cell as f32 * st.scale * CANDIDATE_NEAR_CELLS;
+    st.lost.candidates.begin_frame(near);
+    let mut budget = p.windows_per_frame;
+    // The window at the current position, followed with the frozen filter.
+    let (scale, cand) = (st.scale, st.lost.candidates.current());
+    let (pos, conf, peak) = evaluate(st, frame, st.pos, scale, spec)?;
+    st.pos = pos;
+    let mut best = (conf, peak);
+    budget = budget.saturating_sub(1);
+    match cand {
+        Some(_) if st.lost.candidates.is_candidate(pos) => {
+            st.lost.candidates.followed(pos, scale, conf, threshold);
+        }
+        Some(c) => {
+            let (cpos, cconf, cpeak) = evaluate(st, frame, c.pos, c.scale, spec)?;
+            if cconf > best.0 {
+                best = (cconf, cpeak);
+            }
+            st.lost.candidates.followed(cpos, c.scale, cconf, threshold);
+            st.lost.candidates.offer(pos, scale, conf, threshold);
+            budget = budget.saturating_sub(1);
+        }
+        None => st.lost.candidates.offer(pos, scale, conf, threshold),
+    }
+    for _ in 0..budget {
+        let Some(w) = st.lost.plan.next_window() else {
+            break;
+        };
+        let scale = (st.lost.scale_at_loss * w.scale).clamp(st.min_scale, st.max_scale);
+        let (pos, conf, peak) = evaluate(st, frame, w.center, scale, spec)?;
+        if conf > best.0 {
+            best = (conf, peak);
+        }
+        st.lost.candidates.offer(pos, scale, conf, threshold);
+    }
+    if let Some(c) = st.lost.candidates.end_frame(p.reacquire_frames) {
+        st.pos = c.pos;
+        st.scale = c.scale;
+        st.lost.candidates.clear();
+        let (state, reason) = st.states.reacquired();
+        return Ok(BevtTracker::output_at(
+            st,
+            c.pos,
+            c.scale,
+            (LOST_CONSENSUS, false, best.1),
+            (c.confidence, state, reason),
+        ));
+    }
+    let (state, reason) = st.states.searching(best.0);
+    let (pos, scale, conf) = match st.lost.candidates.current() {
+        Some(c) => (c.pos, c.scale, c.confidence),
+        None => (st.pos, st.scale, best.0),
+    };
+    Ok(BevtTracker::output_at(
+        st,
+        pos,
+        scale,
+        (LOST_CONSENSUS, false, best.1),
+        (conf, state, reason),
+    ))
+}
