@@ -68,7 +68,7 @@ samples["diagnostic_array"] = T("diagnostic_msgs/msg/DiagnosticArray")(header=hd
     values=[KV(key="fps", value="30.0"), KV(key="dropped", value="2")])])
 samples["track_status"] = T("bevt_msgs/msg/TrackStatus")(
     header=hdr, state=2, reason="consensus 0.15 <= 0.20", x=1.5, y=2.5, width=40.0, height=30.0,
-    consensus=0.15, learned=False, peak=0.012, scale=1.25, latency_ms=4.5,
+    consensus=0.15, confidence=0.42, learned=False, peak=0.012, scale=1.25, latency_ms=4.5,
     frames_processed=100, frames_dropped=3, track_id=2)
 samples["reinit_request"] = T("bevt_msgs/msg/Reinit_Request")(
     x=10.0, y=20.0, width=30.0, height=40.0, stamp=Time(sec=5, nanosec=6), frame_id="cam")

@@ -202,8 +202,8 @@ impl Default for VerificationConfig {
             threshold_low: 0.2,
             threshold_high: 0.5,
             response_model_rate: 0.013,
-            gate_low: 0.5,
-            gate_high: 0.8,
+            gate_low: 0.3,
+            gate_high: 0.5,
             max_consecutive_skips: 5,
         }
     }
@@ -253,7 +253,7 @@ impl Default for TrackStateConfig {
     fn default() -> Self {
         Self {
             lost_threshold: 0.3,
-            lost_frames: 5,
+            lost_frames: 12,
         }
     }
 }

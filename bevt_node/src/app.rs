@@ -19,7 +19,9 @@
 use crate::convert::{
     clip, detections_from_output, frame_from_compressed, frame_from_image, ImageLimits, PixelBuffer,
 };
-use bevt_core::{BBox, BevtTracker, Frame, PixelFormat, TrackOutput, Tracker, TrackerSpec};
+use bevt_core::{
+    BBox, BevtTracker, Frame, PixelFormat, TrackOutput, TrackState, Tracker, TrackerSpec,
+};
 use bevt_msgs::bevt::{ReinitRequest, ReinitResponse, TrackStatus};
 use bevt_msgs::builtin_interfaces::Time;
 use bevt_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
@@ -224,6 +226,8 @@ pub struct NodeCore {
     frames_processed: u32,
     frames_dropped: u32,
     last_output: Option<TrackOutput>,
+    /// `STATE_LOST` means the tracker lost the target (not a dropped track or stale camera).
+    target_lost: bool,
     last_header: Header,
     last_image_at: Option<Instant>,
     state: u8,
@@ -237,6 +241,23 @@ impl std::fmt::Debug for NodeCore {
             .field("track_id", &self.track_id)
             .field("buffered", &self.buffer.len())
             .finish()
+    }
+}
+
+/// `track_status` state and reason of one tracked frame.
+fn status_of(o: &TrackOutput) -> (u8, String) {
+    match o.state {
+        TrackState::Tracking if o.learned => (TrackStatus::STATE_TRACKING, String::new()),
+        TrackState::Tracking => (
+            TrackStatus::STATE_LOW_CONSENSUS,
+            format!(
+                "verification: frame not learned (consensus {:.3}, confidence {:.2})",
+                o.consensus, o.confidence
+            ),
+        ),
+        TrackState::Uncertain => (TrackStatus::STATE_UNCERTAIN, o.reason.to_string()),
+        TrackState::Lost => (TrackStatus::STATE_LOST, o.reason.to_string()),
+        TrackState::Reacquired => (TrackStatus::STATE_REACQUIRED, o.reason.to_string()),
     }
 }
 
@@ -273,6 +294,7 @@ impl NodeCore {
             frames_processed: 0,
             frames_dropped: 0,
             last_output: None,
+            target_lost: false,
             last_header: Header::default(),
             last_image_at: None,
             state: TrackStatus::STATE_IDLE,
@@ -334,25 +356,15 @@ impl NodeCore {
             let r = self.tracker.update(&frame);
             match r {
                 Ok(o) => {
-                    self.state = if o.learned {
-                        TrackStatus::STATE_TRACKING
-                    } else {
-                        TrackStatus::STATE_LOW_CONSENSUS
-                    };
-                    self.reason = if o.learned {
-                        String::new()
-                    } else {
-                        format!(
-                            "consensus {:.3} <= {:.2}: frame not learned",
-                            o.consensus, self.spec.verify.threshold_low
-                        )
-                    };
+                    (self.state, self.reason) = status_of(&o);
+                    self.target_lost = o.state == TrackState::Lost;
                     self.last_output = Some(o);
                     Some(o)
                 }
                 Err(bevt_core::TrackError::FrameMismatch { expected, got }) => {
                     self.tracker.reset();
                     self.last_output = None;
+                    self.target_lost = false;
                     self.state = TrackStatus::STATE_LOST;
                     self.reason = format!(
                         "image changed from {expected} to {got}: track reset, re-initialise"
@@ -392,6 +404,7 @@ impl NodeCore {
             width: b.w,
             height: b.h,
             consensus: out.map_or(0.0, |o| o.consensus),
+            confidence: out.map_or(0.0, |o| o.confidence),
             learned: out.is_some_and(|o| o.learned),
             peak: out.map_or(0.0, |o| o.peak),
             scale: out.map_or(0.0, |o| o.scale),
@@ -565,6 +578,7 @@ impl NodeCore {
         let silent = now.saturating_duration_since(last);
         if self.tracker.is_initialized() && silent > self.settings.stale_timeout {
             self.state = TrackStatus::STATE_LOST;
+            self.target_lost = false;
             self.reason = format!("camera stale: no image for {:.1} s", silent.as_secs_f32());
             let header = self.last_header.clone();
             return Some(self.outputs(&header, None, now).status);
@@ -639,8 +653,14 @@ impl NodeCore {
     /// `/diagnostics` content for the node.
     pub fn diagnostics(&self) -> DiagnosticArray {
         let level = match self.state {
-            TrackStatus::STATE_TRACKING | TrackStatus::STATE_IDLE => DiagnosticStatus::OK,
-            TrackStatus::STATE_LOW_CONSENSUS => DiagnosticStatus::WARN,
+            TrackStatus::STATE_TRACKING
+            | TrackStatus::STATE_IDLE
+            | TrackStatus::STATE_REACQUIRED => DiagnosticStatus::OK,
+            TrackStatus::STATE_LOW_CONSENSUS | TrackStatus::STATE_UNCERTAIN => {
+                DiagnosticStatus::WARN
+            }
+            // The target is lost while the tracker still runs: WARN; a dropped track: STALE.
+            TrackStatus::STATE_LOST if self.target_lost => DiagnosticStatus::WARN,
             TrackStatus::STATE_LOST => DiagnosticStatus::STALE,
             _ => DiagnosticStatus::ERROR,
         };
@@ -671,6 +691,10 @@ impl NodeCore {
                     kv(
                         "consensus",
                         o.map_or("-".into(), |o| format!("{:.3}", o.consensus)),
+                    ),
+                    kv(
+                        "confidence",
+                        o.map_or("-".into(), |o| format!("{:.3}", o.confidence)),
                     ),
                     kv("buffered_frames", self.buffer.len().to_string()),
                     kv("buffered_bytes", self.buffer_bytes.to_string()),
@@ -1076,6 +1100,43 @@ mod tests {
         let o = n.on_image(CameraMsg::Raw(&bad), Instant::now());
         assert!(o.status.reason.len() < 400);
         assert!(n.diagnostics().status[0].message.len() < 400);
+    }
+
+    #[test]
+    fn lost_target_warns_publishes_no_detection_and_reinit_clears_it() {
+        let seq = SynthParams {
+            frames: 60,
+            hidden: Some((10, 60)),
+            ..SynthParams::default()
+        };
+        let mut n = core();
+        let (m, t0) = image(&seq, 0);
+        n.on_image(CameraMsg::Raw(&m), Instant::now());
+        assert!(n.on_reinit(&req(t0, Time::default())).0.success);
+        let mut lost = None;
+        for t in 1..seq.frames {
+            let (m, _) = image(&seq, t);
+            let o = n.on_image(CameraMsg::Raw(&m), Instant::now());
+            if o.status.state == TrackStatus::STATE_LOST {
+                lost = Some(o);
+                break;
+            }
+            assert_eq!(o.detections.detections.len(), 1);
+        }
+        let o = lost.expect("never lost");
+        assert!(o.detections.detections.is_empty());
+        assert!(
+            o.status.reason.starts_with("target lost: confidence"),
+            "{}",
+            o.status.reason
+        );
+        assert_eq!(n.diagnostics().status[0].level, DiagnosticStatus::WARN);
+        let (r, out) = n.on_reinit(&req(t0, Time::default()));
+        assert!(r.success, "{}", r.message);
+        let out = out.unwrap();
+        assert_eq!(out.status.state, TrackStatus::STATE_TRACKING);
+        assert_eq!(out.detections.detections.len(), 1);
+        assert_eq!(n.diagnostics().status[0].level, DiagnosticStatus::OK);
     }
 
     #[test]

@@ -10,7 +10,7 @@
 //! image with grey instead of failing, and such a frame must not be learned.
 
 use bevt_core::image::MAX_FRAME_SIDE;
-use bevt_core::{BBox, Frame, PixelFormat, TrackOutput};
+use bevt_core::{BBox, Frame, PixelFormat, TrackOutput, TrackState};
 use bevt_msgs::geometry_msgs::PoseWithCovariance;
 use bevt_msgs::sensor_msgs::{CompressedImage, Image};
 use bevt_msgs::std_msgs::Header;
@@ -334,7 +334,8 @@ pub fn frame_from_compressed<'a>(
 }
 
 /// `vision_msgs/Detection2DArray` for one tracker output: the box (centre, size), the
-/// consensus score as the hypothesis score, the track id as `id`.
+/// confidence as the hypothesis score, the track id as `id`; no detection while the target
+/// is lost (the ROS convention: no detection rather than a wrong one).
 pub fn detections_from_output(
     header: &Header,
     out: Option<&TrackOutput>,
@@ -342,6 +343,7 @@ pub fn detections_from_output(
     class_id: &str,
 ) -> Detection2DArray {
     let detections = out
+        .filter(|o| o.state != TrackState::Lost)
         .map(|o| {
             let c = o.bbox.center();
             vec![Detection2D {
@@ -349,7 +351,7 @@ pub fn detections_from_output(
                 results: vec![ObjectHypothesisWithPose {
                     hypothesis: ObjectHypothesis {
                         class_id: class_id.to_string(),
-                        score: o.consensus as f64,
+                        score: o.confidence as f64,
                     },
                     pose: PoseWithCovariance::default(),
                 }],
@@ -690,7 +692,7 @@ mod tests {
     fn detection_round_trips_the_box_and_carries_the_score() {
         let out = TrackOutput {
             bbox: BBox::new(10.0, 20.0, 30.0, 40.0),
-            consensus: 0.9,
+            consensus: 0.5,
             learned: true,
             peak: 0.1,
             scale: 1.0,
@@ -706,5 +708,20 @@ mod tests {
         assert!(detections_from_output(&Header::default(), None, 3, "t")
             .detections
             .is_empty());
+        let lost = TrackOutput {
+            state: bevt_core::TrackState::Lost,
+            confidence: 0.1,
+            ..out
+        };
+        let d = detections_from_output(&Header::default(), Some(&lost), 3, "t");
+        assert!(d.detections.is_empty());
+        for state in [
+            bevt_core::TrackState::Uncertain,
+            bevt_core::TrackState::Reacquired,
+        ] {
+            let o = TrackOutput { state, ..out };
+            let d = detections_from_output(&Header::default(), Some(&o), 3, "t");
+            assert_eq!(d.detections.len(), 1);
+        }
     }
 }

@@ -369,6 +369,8 @@ pub mod bevt {
         pub height: f32,
         /// Consensus score.
         pub consensus: f32,
+        /// Confidence that the box is on the target, `[0, 1]`.
+        pub confidence: f32,
         /// Learned from this frame.
         pub learned: bool,
         /// Response peak.
@@ -391,10 +393,14 @@ pub mod bevt {
         pub const STATE_TRACKING: u8 = 1;
         /// Tracking; verification rejected the frame.
         pub const STATE_LOW_CONSENSUS: u8 = 2;
-        /// Track dropped.
+        /// Target lost (or track dropped).
         pub const STATE_LOST: u8 = 3;
         /// Last input unusable.
         pub const STATE_ERROR: u8 = 4;
+        /// Tracking with low confidence.
+        pub const STATE_UNCERTAIN: u8 = 5;
+        /// The lost target was found again on this frame.
+        pub const STATE_REACQUIRED: u8 = 6;
     }
     ros_type!(TrackStatus, "bevt_msgs", "TrackStatus");
 

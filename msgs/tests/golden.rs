@@ -130,6 +130,7 @@ fn project_types_match_the_reference_cdr() {
             width: 40.0,
             height: 30.0,
             consensus: 0.15,
+            confidence: 0.42,
             learned: false,
             peak: 0.012,
             scale: 1.25,

@@ -26,7 +26,7 @@ fn node_settings() -> NodeSettings {
 
 /// A domain per test and per process, so parallel tests and runs do not meet.
 fn domain(k: u16) -> u16 {
-    100 + (std::process::id() % 40) as u16 * 3 + k
+    100 + (std::process::id() % 30) as u16 * 4 + k
 }
 
 struct Running {
@@ -50,6 +50,16 @@ impl Drop for Running {
 }
 
 fn start(k: u16) -> Running {
+    start_with(
+        k,
+        SynthParams {
+            frames: 200,
+            ..SynthParams::default()
+        },
+    )
+}
+
+fn start_with(k: u16, seq: SynthParams) -> Running {
     let settings = RosSettings {
         domain_id: domain(k),
         ..RosSettings::default()
@@ -64,10 +74,6 @@ fn start(k: u16) -> Running {
         .name("bevt-node-under-test".into())
         .spawn(move || run(core, &s2, st2, |_| {}).unwrap())
         .unwrap();
-    let seq = SynthParams {
-        frames: 200,
-        ..SynthParams::default()
-    };
     let (camera, truth) = spawn_camera(&settings, seq, 20.0, stop.clone()).unwrap();
     let gs = GroundStation::new(&settings).unwrap();
     Running {
@@ -175,6 +181,88 @@ fn bad_reinit_requests_are_refused_and_the_node_keeps_running() {
     assert!(resp.success, "{}", resp.message);
     let (n, good) = collect(&r, Duration::from_secs(2), 5.0);
     assert!(n >= 10 && good * 10 >= n * 9, "{good}/{n}");
+}
+
+#[test]
+fn lost_target_is_published_with_empty_detections_and_reinit_clears_it_over_dds() {
+    use bevt_msgs::bevt::TrackStatus;
+    // The target disappears 3 s into the sequence (20 Hz) and does not come back.
+    let r = start_with(
+        3,
+        SynthParams {
+            frames: 600,
+            hidden: Some((60, 600)),
+            ..SynthParams::default()
+        },
+    );
+    let (stamp, b) = delayed_truth(&r, Duration::from_millis(100));
+    let resp =
+        r.gs.reinit(&request(b, stamp), Duration::from_secs(10))
+            .expect("reinit answered");
+    assert!(resp.success, "{}", resp.message);
+    let end = Instant::now() + Duration::from_secs(15);
+    let mut lost = None;
+    let mut detections = Vec::new();
+    while lost.is_none() && Instant::now() < end {
+        lost =
+            r.gs.take_status()
+                .into_iter()
+                .find(|s| s.state == TrackStatus::STATE_LOST);
+        detections.extend(r.gs.take_detections());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let lost = lost.expect("no lost state published");
+    assert!(
+        lost.reason.starts_with("target lost: confidence"),
+        "{}",
+        lost.reason
+    );
+    assert!(lost.confidence < 0.5, "{}", lost.confidence);
+    // The detections of that frame: an empty array with the image's header.
+    let end = Instant::now() + Duration::from_secs(5);
+    let frame = loop {
+        if let Some(d) = detections
+            .iter()
+            .find(|d| d.header.stamp == lost.header.stamp)
+        {
+            break d.clone();
+        }
+        assert!(Instant::now() < end, "no detections for the lost frame");
+        detections.extend(r.gs.take_detections());
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    assert!(frame.detections.is_empty(), "{frame:?}");
+    // A reinit (on the newest frame) clears it: tracking again, with a detection.
+    let resp =
+        r.gs.reinit(&request(b, 0), Duration::from_secs(10))
+            .expect("reinit answered");
+    assert!(resp.success, "{}", resp.message);
+    let end = Instant::now() + Duration::from_secs(10);
+    let after = loop {
+        if let Some(s) =
+            r.gs.take_status()
+                .into_iter()
+                .find(|s| s.track_id > lost.track_id)
+        {
+            break s;
+        }
+        assert!(Instant::now() < end, "no status after the reinit");
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    assert_ne!(after.state, TrackStatus::STATE_LOST, "{}", after.reason);
+    let end = Instant::now() + Duration::from_secs(10);
+    loop {
+        let found = r.gs.take_detections().into_iter().any(|d| {
+            d.detections
+                .first()
+                .is_some_and(|d| d.id == after.track_id.to_string())
+        });
+        if found {
+            break;
+        }
+        assert!(Instant::now() < end, "no detection after the reinit");
+        std::thread::sleep(Duration::from_millis(10));
+    }
 }
 
 mod topics_and_bad_input {
