@@ -395,6 +395,8 @@ pub fn run(
     };
     let mut next_diag = Instant::now();
     let mut pending: std::collections::VecDeque<PendingReinit> = Default::default();
+    // Refusals since the last log line (a flood of requests is not a flood of logs).
+    let (mut refused, mut last_refusal) = (0u32, String::new());
     while !shutdown.load(Ordering::Relaxed) {
         // 1. Read every request that arrived; refuse at once what the rate limit refuses.
         let admit = |core: &mut NodeCore, len: usize| {
@@ -413,11 +415,9 @@ pub fn run(
             match admit(&mut core, pending.len()) {
                 Ok(()) => pending.push_back(PendingReinit::Service(id, req)),
                 Err(resp) => {
-                    log(
-                        &node,
-                        ros2_client::log::LogLevel::Warn,
-                        &format!("reinit: {}", resp.message),
-                    );
+                    // Each refusal is answered; the log gets one summary per period.
+                    refused = refused.saturating_add(1);
+                    last_refusal = resp.message.clone();
                     let _ = srv_reinit.send_response(id, resp);
                 }
             }
@@ -430,11 +430,10 @@ pub fn run(
             let req = crate::convert::reinit_request(b, det.header.stamp, &det.header.frame_id);
             match admit(&mut core, pending.len()) {
                 Ok(()) => pending.push_back(PendingReinit::Topic(req)),
-                Err(resp) => log(
-                    &node,
-                    ros2_client::log::LogLevel::Warn,
-                    &format!("init topic: {}", resp.message),
-                ),
+                Err(resp) => {
+                    refused = refused.saturating_add(1);
+                    last_refusal = resp.message;
+                }
             }
         }
         for _ in 0..MAX_REQUESTS_PER_TURN {
@@ -502,6 +501,16 @@ pub fn run(
         }
         if now >= next_diag {
             next_diag = later(now, settings.diagnostics_period);
+            if refused > 0 {
+                log(
+                    &node,
+                    ros2_client::log::LogLevel::Warn,
+                    &format!(
+                        "{refused} re-initialisation request(s) refused, the last: {last_refusal}"
+                    ),
+                );
+                refused = 0;
+            }
             if let Some(s) = core.on_tick(now) {
                 let _ = pub_status.publish(s);
             }
