@@ -22,6 +22,10 @@ use std::time::{Duration, Instant};
 const DEMO_OPERATOR_DELAY: Duration = Duration::from_millis(400);
 /// Demo camera rate.
 const DEMO_RATE_HZ: f64 = 20.0;
+/// Demo frames in which the target is out of view (5 s to 7 s at 20 Hz).
+const DEMO_HIDDEN_FRAMES: (usize, usize) = (100, 140);
+/// Where the demo target reappears, relative to its path, pixels.
+const DEMO_REAPPEAR_OFFSET: (f32, f32) = (-150.0, 0.0);
 
 fn demo(launch: Launch, stop: Arc<AtomicBool>) -> Result<()> {
     let seq = SynthParams {
@@ -30,6 +34,10 @@ fn demo(launch: Launch, stop: Arc<AtomicBool>) -> Result<()> {
         frames: 300,
         target: (64.0, 48.0),
         path_amplitude: (120.0, 60.0),
+        // The target leaves the view for 2 s and comes back 150 px to the left, so the
+        // demo shows the lost state and the re-detection (issue 8).
+        hidden: Some(DEMO_HIDDEN_FRAMES),
+        reappear_offset: DEMO_REAPPEAR_OFFSET,
         ..SynthParams::default()
     };
     println!(
@@ -74,9 +82,20 @@ fn demo(launch: Launch, stop: Arc<AtomicBool>) -> Result<()> {
         .context("--duration is too long")?;
     let mut next_print = Instant::now() + Duration::from_secs(1);
     let mut last = None;
+    let mut status = None;
     while Instant::now() < end && !stop.load(Ordering::Relaxed) {
         if let Some(d) = gs.take_detections().into_iter().last() {
             last = Some(d);
+        }
+        for s in gs.take_status() {
+            // Print every state change with its reason as it arrives.
+            let changed = status
+                .as_ref()
+                .is_none_or(|p: &bevt_msgs::bevt::TrackStatus| p.state != s.state);
+            if changed && !s.reason.is_empty() {
+                println!("track_status: state {} ({})", s.state, s.reason);
+            }
+            status = Some(s);
         }
         if Instant::now() >= next_print {
             next_print += Duration::from_secs(1);
@@ -91,11 +110,12 @@ fn demo(launch: Launch, stop: Arc<AtomicBool>) -> Result<()> {
                         format!("{:.1} px", b.center().distance(&t.center()))
                     });
                     println!(
-                        "track {}: box {:7.1} {:7.1} {:5.1} {:5.1}  consensus {:.3}  error vs truth {err}",
+                        "track {}: box {:7.1} {:7.1} {:5.1} {:5.1}  confidence {:.3}  error vs truth {err}",
                         d.detections[0].id, b.x, b.y, b.w, b.h, d.detections[0].results[0].hypothesis.score
                     );
                 }
-                _ => println!("no detection yet"),
+                Some(_) => println!("no detection (target lost)"),
+                None => println!("no detection yet"),
             }
         }
         std::thread::sleep(Duration::from_millis(20));
