@@ -36,7 +36,7 @@ use crate::{
   //qos::HasQoSPolicy,
   rtps::{
     constant::*,
-    fragment_assembler::FragmentLimits,
+    fragment_assembler::{FragmentLimits, FragmentPool},
     message_receiver::MessageReceiver,
     outbound::SocketId,
     reader::{Reader, ReaderIngredients},
@@ -142,8 +142,10 @@ pub struct DPEventLoop {
   // `src/rtps/loopback_same_host_design.md`.
   same_host_loopback: bool,
 
-  // Limits on reassembling fragmented samples, given to every local reader.
+  // Limits on reassembling fragmented samples, given to every local reader,
+  // and the bytes of incomplete samples all of them hold.
   fragment_limits: FragmentLimits,
+  fragment_pool: FragmentPool,
 }
 
 impl DPEventLoop {
@@ -266,6 +268,7 @@ impl DPEventLoop {
       discovery_command_sender,
       same_host_loopback,
       fragment_limits,
+      fragment_pool: FragmentPool::default(),
     })
   }
 
@@ -1083,7 +1086,7 @@ impl DPEventLoop {
     // Reader commands share the poll waker. The ready queue records the entity
     // id, so there is nothing to register under the reader token.
     new_reader.set_requested_deadline_check_timer();
-    new_reader.set_fragment_limits(&self.fragment_limits);
+    new_reader.set_fragment_limits(&self.fragment_limits, self.fragment_pool.clone());
     trace!("Add reader: {new_reader:?}");
     self.message_receiver.add_reader(new_reader);
   }
@@ -1359,6 +1362,7 @@ mod tests {
         None,
         0,
         true,
+        FragmentLimits::default(),
         reader_ready,
         writer_ready,
         waker,

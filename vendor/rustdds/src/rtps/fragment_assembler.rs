@@ -49,6 +49,10 @@ pub struct FragmentLimits {
   pub max_assembly_bytes_per_reader: usize,
   /// Same as `max_assembly_bytes_per_reader`, for a built-in reader.
   pub max_builtin_assembly_bytes_per_reader: usize,
+  /// Most bytes of incomplete samples all readers of the participant keep
+  /// together. A reader over it evicts its own incomplete samples (the new one
+  /// too, if need be), so the total is bounded however many readers there are.
+  pub max_assembly_bytes_per_participant: usize,
   /// An incomplete sample that received no fragment for this long is dropped.
   /// Checked on a timer, so a stale sample lives at most twice this long even
   /// if no further traffic arrives.
@@ -65,13 +69,20 @@ impl FragmentLimits {
   pub const DEFAULT_MAX_ASSEMBLIES_PER_READER: usize = 256;
   /// Default [`assembly_timeout`](Self::assembly_timeout): 10 s.
   pub const DEFAULT_ASSEMBLY_TIMEOUT: Duration = Duration::from_secs(10);
+  /// Room in [`max_assembly_bytes_per_participant`](Self::max_assembly_bytes_per_participant)
+  /// beyond one user reader's budget, for the built-in readers: 16 MiB.
+  pub const BUILTIN_PARTICIPANT_ROOM: usize = 16 * 1024 * 1024;
 
   /// Limits with the given maximum user sample size; the per-reader byte
-  /// budget is twice that, everything else is default.
+  /// budget is twice that, the participant's that plus
+  /// [`BUILTIN_PARTICIPANT_ROOM`](Self::BUILTIN_PARTICIPANT_ROOM), everything
+  /// else is default.
   pub fn with_max_sample_size(max_sample_size: usize) -> Self {
+    let per_reader = max_sample_size.saturating_mul(2);
     Self {
       max_sample_size,
-      max_assembly_bytes_per_reader: max_sample_size.saturating_mul(2),
+      max_assembly_bytes_per_reader: per_reader,
+      max_assembly_bytes_per_participant: per_reader.saturating_add(Self::BUILTIN_PARTICIPANT_ROOM),
       ..Self::default()
     }
   }
@@ -90,6 +101,7 @@ impl FragmentLimits {
       } else {
         self.max_assembly_bytes_per_reader
       },
+      max_participant_bytes: self.max_assembly_bytes_per_participant,
       timeout: self.assembly_timeout,
     }
   }
@@ -103,6 +115,8 @@ impl Default for FragmentLimits {
       max_assemblies_per_reader: Self::DEFAULT_MAX_ASSEMBLIES_PER_READER,
       max_assembly_bytes_per_reader: 2 * Self::DEFAULT_MAX_SAMPLE_SIZE,
       max_builtin_assembly_bytes_per_reader: 4 * Self::DEFAULT_MAX_BUILTIN_SAMPLE_SIZE,
+      max_assembly_bytes_per_participant: 2 * Self::DEFAULT_MAX_SAMPLE_SIZE
+        + Self::BUILTIN_PARTICIPANT_ROOM,
       assembly_timeout: Self::DEFAULT_ASSEMBLY_TIMEOUT,
     }
   }
@@ -114,8 +128,13 @@ pub(crate) struct ReaderFragmentLimits {
   pub max_sample_size: usize,
   pub max_assemblies: usize,
   pub max_bytes: usize,
+  pub max_participant_bytes: usize,
   pub timeout: Duration,
 }
+
+/// Bytes of incomplete samples held by all readers of a participant (they all
+/// live on its event-loop thread).
+pub(crate) type FragmentPool = std::rc::Rc<std::cell::Cell<usize>>;
 
 // Bytes charged against the per-reader budget for each stored run of
 // fragments (map node and `Bytes` handle) and for each incomplete sample, so

@@ -42,7 +42,7 @@ use crate::{
   network::udp_sender::UDPSender,
   polling::{ReadySender, SharedTimer, WakeReceiver},
   rtps::{
-    fragment_assembler::{FragmentAssembler, FragmentLimits, ReaderFragmentLimits},
+    fragment_assembler::{FragmentAssembler, FragmentLimits, FragmentPool, ReaderFragmentLimits},
     message_receiver::MessageReceiverState,
     rtps_writer_proxy::RtpsWriterProxy,
     timed_event::DpTimerEvent,
@@ -142,6 +142,9 @@ pub(crate) struct Reader {
   last_fragment_garbage_collect: Timestamp,
   fragment_limits: ReaderFragmentLimits,
   fragment_gc_scheduled: bool,
+  // The participant's total of incomplete-sample bytes, and this reader's share.
+  fragment_pool: FragmentPool,
+  fragment_bytes: usize,
   matched_writers: BTreeMap<GUID, RtpsWriterProxy>,
   writer_match_count_total: i32, // total count, never decreases
 
@@ -158,6 +161,13 @@ pub(crate) struct Reader {
 
   #[allow(dead_code)] // to avoid warning if no security feature
   security_plugins: Option<SecurityPluginsHandle>,
+}
+
+impl Drop for Reader {
+  fn drop(&mut self) {
+    // Give this reader's incomplete-sample bytes back to the participant's pool.
+    self.sync_fragment_bytes(0);
+  }
 }
 
 // minimum interval (max frequency) of AssemblyBuffer GC
@@ -209,6 +219,8 @@ impl Reader {
       fragment_limits: FragmentLimits::default()
         .for_reader(!i.guid.entity_id.entity_kind.is_user_defined()),
       fragment_gc_scheduled: false,
+      fragment_pool: FragmentPool::default(),
+      fragment_bytes: 0,
       matched_writers: BTreeMap::new(),
       writer_match_count_total: 0,
       requested_deadline_missed_count: 0,
@@ -223,10 +235,31 @@ impl Reader {
       security_plugins: i.security_plugins,
     }
   }
+
   /// Sets the limits on reassembling fragmented samples (the user-topic or the
-  /// built-in ones, by this reader's entity kind).
-  pub(crate) fn set_fragment_limits(&mut self, limits: &FragmentLimits) {
+  /// built-in ones, by this reader's entity kind) and the participant's pool.
+  pub(crate) fn set_fragment_limits(&mut self, limits: &FragmentLimits, pool: FragmentPool) {
     self.fragment_limits = limits.for_reader(!self.my_guid.entity_id.entity_kind.is_user_defined());
+    self.sync_fragment_bytes(0);
+    self.fragment_pool = pool;
+    self.fragment_bytes = 0;
+    self.sync_fragment_bytes(self.assembling_bytes());
+  }
+
+  // Bytes held in this reader's incomplete samples.
+  fn assembling_bytes(&self) -> usize {
+    self
+      .fragment_assemblers
+      .values()
+      .map(FragmentAssembler::charged_bytes)
+      .sum()
+  }
+
+  // Records this reader's incomplete-sample bytes in the participant's pool.
+  fn sync_fragment_bytes(&mut self, bytes: usize) {
+    let others = self.fragment_pool.get().saturating_sub(self.fragment_bytes);
+    self.fragment_pool.set(others.saturating_add(bytes));
+    self.fragment_bytes = bytes;
   }
 
   // TODO: check if it's necessary to implement different handlers for discovery
@@ -720,7 +753,11 @@ impl Reader {
               b.saturating_add(fa.charged_bytes()),
             )
           });
-      if count <= self.fragment_limits.max_assemblies && bytes <= self.fragment_limits.max_bytes {
+      self.sync_fragment_bytes(bytes);
+      if count <= self.fragment_limits.max_assemblies
+        && bytes <= self.fragment_limits.max_bytes
+        && self.fragment_pool.get() <= self.fragment_limits.max_participant_bytes
+      {
         break;
       }
       let victim = self
@@ -737,6 +774,7 @@ impl Reader {
       }
     }
     self.fragment_assemblers.retain(|_, fa| !fa.is_empty());
+    self.sync_fragment_bytes(self.assembling_bytes());
   }
 
   // Keeps a garbage-collection timer running while samples are incomplete, so
@@ -782,6 +820,7 @@ impl Reader {
         fa.garbage_collect_before(expire_before);
       });
     self.fragment_assemblers.retain(|_, fa| !fa.is_empty());
+    self.sync_fragment_bytes(self.assembling_bytes());
   }
 
   fn missing_frags_for(
@@ -2110,5 +2149,113 @@ mod tests {
     // 3. Verify that the reader does not contain a writer proxy for the writer that
     // we attempted to add
     assert!(reader.matched_writer(writer_guid).is_none());
+  }
+
+  // Issue of BEVT-rs: DATA_FRAG reassembly must be bounded for any sender.
+  // Unmatched writers are ignored, the participant's pool bounds a reader, and
+  // the timer drops idle incomplete samples without further traffic.
+  #[test]
+  fn fragment_reassembly_is_bounded_and_expires() {
+    use crate::messages::submessages::submessages::{DataFrag, DATAFRAG_Flags};
+
+    let dds_cache = Arc::new(RwLock::new(DDSCache::new()));
+    let qos_policy = QosPolicies::qos_none();
+    let topic_cache_handle = dds_cache.write().unwrap().add_new_topic(
+      "frag_topic".to_string(),
+      TypeDesc::new("test_type".to_string()),
+      &qos_policy,
+    );
+    let (notification_sender, _notification_receiver) =
+      crate::mio_source::notification_channel(100);
+    let (_notification_event_source, notification_event_sender) =
+      mio_source::make_poll_channel().unwrap();
+    let (status_sender, _status_receiver) = sync_status_channel::<DataReaderStatus>(4).unwrap();
+    let (participant_status_sender, _participant_status_receiver) =
+      sync_status_channel(16).unwrap();
+    let (_reader_command_sender, reader_command_receiver) =
+      wake_channel::<ReaderCommand>(10, &LoopWaker::new());
+    let reader_guid = GUID::dummy_test_guid(EntityKind::READER_NO_KEY_USER_DEFINED);
+    let reader_ing = ReaderIngredients {
+      guid: reader_guid,
+      notification_sender,
+      status_sender,
+      topic_name: "frag_topic".to_string(),
+      topic_cache_handle,
+      like_stateless: false,
+      qos_policy,
+      data_reader_command_receiver: reader_command_receiver,
+      data_reader_waker: Arc::new(Mutex::new(None)),
+      poll_event_sender: notification_event_sender,
+      security_plugins: None,
+      discovery_notify: None,
+    };
+    let mut reader = Reader::new(
+      reader_ing,
+      Rc::new(UDPSender::new(0).unwrap()),
+      new_shared_timer(),
+      participant_status_sender,
+    );
+    let pool = FragmentPool::default();
+    let limits = FragmentLimits {
+      max_sample_size: 1 << 20,
+      max_assembly_bytes_per_reader: 1 << 20,
+      max_assembly_bytes_per_participant: 8 * 1024,
+      ..FragmentLimits::default()
+    };
+    reader.set_fragment_limits(&limits, pool.clone());
+
+    let matched = GUID::dummy_test_guid(EntityKind::WRITER_NO_KEY_USER_DEFINED);
+    reader.matched_writer_add(
+      matched,
+      EntityId::UNKNOWN,
+      vec![],
+      vec![],
+      &QosPolicies::qos_none(),
+    );
+    let mut stranger = matched;
+    stranger.prefix = GuidPrefix::new(b"NotMatched!!");
+
+    let frag = |writer: GUID, sn: i64| DataFrag {
+      reader_id: reader_guid.entity_id,
+      writer_id: writer.entity_id,
+      writer_sn: SequenceNumber::new(sn),
+      fragment_starting_num: FragmentNumber::new(1),
+      fragments_in_submessage: 1,
+      data_size: 100 * 1024,
+      fragment_size: 1024,
+      serialized_payload: bytes::Bytes::from(vec![0u8; 1024]),
+      ..DataFrag::default()
+    };
+    let state = |writer: GUID| MessageReceiverState {
+      source_guid_prefix: writer.prefix,
+      ..Default::default()
+    };
+    let flags = BitFlags::<DATAFRAG_Flags>::from_flag(DATAFRAG_Flags::Endianness);
+
+    reader.handle_datafrag_msg(&frag(stranger, 1), flags, &state(stranger));
+    assert!(
+      reader.fragment_assemblers.is_empty(),
+      "unmatched writer assembled"
+    );
+    assert_eq!(pool.get(), 0);
+
+    for sn in 1..=20 {
+      reader.handle_datafrag_msg(&frag(matched, sn), flags, &state(matched));
+      assert!(pool.get() <= 8 * 1024, "pool {} over its limit", pool.get());
+    }
+    assert!(!reader.fragment_assemblers.is_empty());
+    assert!(pool.get() > 0);
+
+    // The timer drops idle samples with no further traffic.
+    reader.fragment_limits.timeout = std::time::Duration::ZERO;
+    std::thread::sleep(std::time::Duration::from_millis(5));
+    reader.handle_timed_event(TimedEvent::FragmentGc);
+    assert!(reader.fragment_assemblers.is_empty(), "idle samples kept");
+    assert_eq!(pool.get(), 0);
+
+    reader.handle_datafrag_msg(&frag(matched, 30), flags, &state(matched));
+    assert!(pool.get() > 0);
+    drop(reader);
+    assert_eq!(pool.get(), 0, "a dropped reader keeps its share");
   }
 }
