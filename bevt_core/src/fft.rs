@@ -172,6 +172,30 @@ pub fn fftshift(input: &[f32], grid: GridSize, out: &mut [f32]) {
     }
 }
 
+/// Shifts the map behind a half spectrum (layout of [`Fft2`]) by `(dy, dx)` cells, circularly
+/// and with sub-cell precision: afterwards `x'(r, c) = x(r + dy, c + dx)`, i.e.
+/// `X'(k) = X(k) · exp(i2π(k_y dy / H + k_x dx / W))` with signed `k_y`.
+pub fn shift_spectrum(spec: &mut [Complex32], grid: GridSize, dy: f32, dx: f32) {
+    let (h, w) = (grid.h, grid.w);
+    let wc = w / 2 + 1;
+    let two_pi = std::f64::consts::TAU;
+    for kx in 0..wc {
+        let ax = two_pi * kx as f64 * f64::from(dx) / w as f64;
+        for ky in 0..h {
+            let sky = if ky <= h / 2 {
+                ky as f64
+            } else {
+                ky as f64 - h as f64
+            };
+            let a = ax + two_pi * sky * f64::from(dy) / h as f64;
+            let rot = Complex32::new(a.cos() as f32, a.sin() as f32);
+            if let Some(v) = spec.get_mut(kx * h + ky) {
+                *v *= rot;
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -241,6 +265,22 @@ mod tests {
         assert_eq!(v, vec![0.0, 1.0, 2.0, 3.0, -2.0, -1.0]);
         let v: Vec<f32> = (0..5).map(|k| signed_freq(k, 5)).collect();
         assert_eq!(v, vec![0.0, 1.0, 2.0, -2.0, -1.0]);
+    }
+
+    #[test]
+    fn shift_spectrum_moves_a_peak_by_whole_cells() {
+        let grid = GridSize { h: 8, w: 10 };
+        let mut fft = Fft2::new(grid);
+        let mut x = vec![0.0f32; grid.len()];
+        x[3 * 10 + 4] = 1.0;
+        let mut spec = vec![Complex32::default(); fft.spectrum_len()];
+        fft.forward(&x, &mut spec);
+        shift_spectrum(&mut spec, grid, 2.0, -3.0);
+        let mut y = vec![0.0f32; grid.len()];
+        fft.inverse(&spec, &mut y);
+        // x'(r, c) = x(r + 2, c − 3): the peak moves from (3, 4) to (1, 7).
+        assert!((y[10 + 7] - 1.0).abs() < 1e-5, "{y:?}");
+        assert!(y.iter().map(|v| v.abs()).sum::<f32>() < 1.0 + 1e-3);
     }
 
     proptest! {

@@ -9,7 +9,7 @@ use crate::confidence::{psr, ConfidenceModel, Measures};
 use crate::config::{FeatureKind, TrackerSpec};
 use crate::error::TrackError;
 use crate::features::{FeatureExtractor, FeatureMap, Hog};
-use crate::fft::{fftshift, Fft2};
+use crate::fft::{fftshift, shift_spectrum, Fft2};
 use crate::filter::admm::{AdmmSolver, CropBox};
 use crate::filter::label::{gaussian_label, hann2d, label_sigma, reg_window};
 use crate::filter::peak::{subpixel_peak, NewtonScratch, Peak};
@@ -267,6 +267,9 @@ struct State {
     resp: Vec<f32>,
     workers: Vec<ScaleWorker>,
     shared: Option<SharedPass>,
+    /// Training sample shifted from the detection features, when the extractor allows it
+    /// ([`FeatureExtractor::train_from_detection`]); empty otherwise.
+    train_xf: Vec<Complex32>,
     /// Side of the sampled patches, pixels ([`FeatureExtractor::input_side`]).
     input_side: usize,
     factors: Vec<f32>,
@@ -530,6 +533,11 @@ impl BevtTracker {
             resp: vec![0.0; grid.len()],
             workers,
             shared,
+            train_xf: if ex.train_from_detection() {
+                vec![Complex32::default(); channels * bins]
+            } else {
+                Vec::new()
+            },
             input_side,
             scale_weights: factors
                 .iter()
@@ -759,8 +767,18 @@ impl Tracker for BevtTracker {
             Verdict::Skip => false,
             Verdict::Learn { rate } => {
                 update_ideal(&mut st.m_ideal, &st.m_curr, vcfg.response_model_rate);
-                st.training_sample(frame)?;
-                for (m, x) in st.model_xf.iter_mut().zip(&st.workers[0].xf) {
+                let sample = if st.train_xf.is_empty() {
+                    st.training_sample(frame)?;
+                    &st.workers[0].xf
+                } else {
+                    // The winning scale's features, moved onto the new position.
+                    st.train_xf.copy_from_slice(&st.workers[best].xf);
+                    for ch in st.train_xf.chunks_exact_mut(st.bins) {
+                        shift_spectrum(ch, st.geo.grid, peak.dy, peak.dx);
+                    }
+                    &st.train_xf
+                };
+                for (m, x) in st.model_xf.iter_mut().zip(sample) {
                     *m = *m * (1.0 - rate) + x * rate;
                 }
                 st.train();

@@ -55,6 +55,9 @@ pub struct SequenceSummary {
     pub reacquire_frames: Vec<Option<usize>>,
     #[serde(skip)]
     labels: Vec<FrameLabel>,
+    /// Consensus distribution over updates: minimum, 5th, 50th and 95th percentiles
+    /// (nearest rank; NaN when there were no updates).
+    pub consensus_quantiles: [f64; 4],
     #[serde(skip)]
     scores: Option<SequenceScores>,
     #[serde(skip)]
@@ -144,6 +147,17 @@ pub struct Summary {
     pub config: serde_json::Value,
 }
 
+/// Minimum, 5th, 50th and 95th percentile (nearest rank) of `v`; NaN when empty.
+fn consensus_quantiles(mut v: Vec<f64>) -> [f64; 4] {
+    v.retain(|x| x.is_finite());
+    if v.is_empty() {
+        return [f64::NAN; 4];
+    }
+    v.sort_by(f64::total_cmp);
+    let at = |q: f64| v[((q * (v.len() - 1) as f64).round() as usize).min(v.len() - 1)];
+    [v[0], at(0.05), at(0.5), at(0.95)]
+}
+
 /// Scores one run.
 pub fn summarize_run(r: &SequenceRun) -> SequenceSummary {
     let ok = r.run.error.is_none();
@@ -185,6 +199,7 @@ pub fn summarize_run(r: &SequenceRun) -> SequenceSummary {
         lost: (!r.truth.is_empty()).then(|| score_lost(&labels)),
         reacquire_frames: reacquire_frames(&states, &r.truth),
         labels,
+        consensus_quantiles: consensus_quantiles(cons),
         scores: ok.then_some(scores).flatten(),
         seconds: r.run.track_seconds,
     }
@@ -537,6 +552,15 @@ pub fn console_table(s: &Summary) -> String {
 mod tests {
     use super::*;
     use crate::runner::TrackRun;
+
+    #[test]
+    fn consensus_quantiles_are_nearest_rank() {
+        let v: Vec<f64> = (0..=100).rev().map(|i| i as f64 / 100.0).collect();
+        assert_eq!(consensus_quantiles(v), [0.0, 0.05, 0.5, 0.95]);
+        assert!(consensus_quantiles(vec![f64::NAN])
+            .iter()
+            .all(|q| q.is_nan()));
+    }
 
     #[test]
     fn failed_runs_are_listed_but_not_averaged() {

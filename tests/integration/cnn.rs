@@ -91,35 +91,42 @@ fn tiny_model_tracks_a_synthetic_target_end_to_end() {
     let Some(rt) = runtime("tiny_model_tracks_a_synthetic_target_end_to_end") else {
         return;
     };
-    let mut cfg = TrackerConfig::default();
-    cfg.features.kind = FeatureKind::Cnn;
-    cfg.features.cnn = Some(CnnConfig {
-        input_size_policy: InputSizePolicy::Patch,
-        ..tiny(&rt)
-    });
-    let seq = SynthParams {
-        frames: 8,
-        ..SynthParams::default()
-    };
-    let mut t = BevtTracker::try_new(cfg.validate().unwrap()).unwrap();
-    let f0 = seq.frame(0);
-    t.init(
-        &Frame::packed(&f0.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap(),
-        f0.truth,
-    )
-    .unwrap();
-    for i in 1..seq.frames {
-        let f = seq.frame(i);
-        let out = t
-            .update(&Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap())
-            .unwrap();
-        assert!(out.bbox.is_finite() && out.consensus > 0.0 && out.consensus <= 1.0);
-        // Random weights track poorly; the path must run and stay near the target.
-        let err = out.bbox.center().distance(&f.truth.center());
-        assert!(
-            err < seq.width as f32 / 2.0,
-            "frame {i}: centre error {err}"
-        );
+    // Every way of getting the features: a pass per scale, one pass for all scales, and the
+    // training sample shifted from the detection features.
+    for (single_pass, from_detection) in [(false, false), (true, false), (false, true)] {
+        let mut cfg = TrackerConfig::default();
+        cfg.features.kind = FeatureKind::Cnn;
+        cfg.features.cnn = Some(CnnConfig {
+            input_size_policy: InputSizePolicy::Patch,
+            single_pass_scales: single_pass,
+            train_from_detection: from_detection,
+            ..tiny(&rt)
+        });
+        let seq = SynthParams {
+            frames: 8,
+            ..SynthParams::default()
+        };
+        let mut t = BevtTracker::try_new(cfg.validate().unwrap()).unwrap();
+        let f0 = seq.frame(0);
+        t.init(
+            &Frame::packed(&f0.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap(),
+            f0.truth,
+        )
+        .unwrap();
+        for i in 1..seq.frames {
+            let f = seq.frame(i);
+            let out = t
+                .update(&Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap())
+                .unwrap();
+            assert!(out.bbox.is_finite() && out.consensus > 0.0 && out.consensus <= 1.0);
+            assert!(out.learned);
+            // Random weights track poorly; the path must run and stay near the target.
+            let err = out.bbox.center().distance(&f.truth.center());
+            assert!(
+                err < seq.width as f32 / 2.0,
+                "single pass {single_pass}, from detection {from_detection}, frame {i}: centre error {err}"
+            );
+        }
     }
 }
 

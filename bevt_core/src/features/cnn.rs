@@ -312,7 +312,7 @@ impl CnnExtractor {
         let side = cfg.input_size;
         let grey = vec![PROBE_GREY; 3 * side * side];
         ex.input = grey.clone();
-        ex.run_input(side).map_err(|e| match e {
+        ex.run_prepared(side).map_err(|e| match e {
             CnnError::Run(reason) => CnnError::InputSize { size: side, reason },
             other => other,
         })?;
@@ -415,7 +415,7 @@ impl CnnExtractor {
         }
         self.input.clear();
         self.input.extend_from_slice(input);
-        self.run_input(side)
+        self.run_prepared(side)
     }
 
     /// Layer `l`'s last raw map as `(channels, h, w, values)`.
@@ -425,8 +425,9 @@ impl CnnExtractor {
         Some((c, m.h, m.w, &m.data))
     }
 
-    /// Fills the input tensor from `patch`: plane order, `value_scale`, mean and std.
-    fn fill_input(&mut self, patch: &Patch) {
+    /// Fills the input tensor from `patch`: plane order, `value_scale`, mean and std (the
+    /// preprocessing stage; public for the stage benchmark).
+    pub fn prepare_input(&mut self, patch: &Patch) {
         let side = patch.side;
         let n = side * side;
         let c = &self.cfg;
@@ -444,9 +445,19 @@ impl CnnExtractor {
         }
     }
 
-    /// Runs the network on `self.input` (`[1, 3, side, side]`), copies every layer's map,
-    /// checks shape and finiteness, and sets each layer's normalisation factor.
-    fn run_input(&mut self, side: usize) -> Result<(), CnnError> {
+    /// Runs the network on the prepared input (`[1, 3, side, side]`, see
+    /// [`Self::prepare_input`]), copies every layer's map, checks shape and finiteness, and
+    /// sets each layer's normalisation factor.
+    ///
+    /// # Errors
+    /// [`CnnError`] for a runtime failure or bad outputs.
+    pub fn run_prepared(&mut self, side: usize) -> Result<(), CnnError> {
+        if side == 0 || self.input.len() != 3 * side * side {
+            return Err(CnnError::Run(format!(
+                "the prepared input has {} values, not 3·{side}²",
+                self.input.len()
+            )));
+        }
         let Self {
             cfg,
             session,
@@ -520,12 +531,13 @@ impl CnnExtractor {
 
     /// Runs the network on `patch`.
     fn run_patch(&mut self, patch: &Patch) -> Result<(), CnnError> {
-        self.fill_input(patch);
-        self.run_input(patch.side)
+        self.prepare_input(patch);
+        self.run_prepared(patch.side)
     }
 
-    /// Resamples every layer's centred `fraction` to `out`'s grid, channel-stacked.
-    fn resample_into(&mut self, fraction: f32, out: &mut FeatureMap) {
+    /// Resamples every layer's centred `fraction` of the last maps to `out`'s grid,
+    /// channel-stacked, times each layer's normalisation factor (the resampling stage).
+    pub fn resample_into(&mut self, fraction: f32, out: &mut FeatureMap) {
         let GridSize { h: gh, w: gw } = out.grid;
         let n = gh * gw;
         let mut ch0 = 0;
@@ -594,6 +606,10 @@ impl FeatureExtractor for CnnExtractor {
 
     fn single_pass_scales(&self) -> bool {
         self.cfg.single_pass_scales
+    }
+
+    fn train_from_detection(&self) -> bool {
+        self.cfg.train_from_detection
     }
 
     fn extract_scales(

@@ -14,7 +14,7 @@ use crate::error::ConfigError;
 use serde::{Deserialize, Serialize};
 
 /// Largest network input side, pixels: bounds the input buffer allocated from config.
-pub const MAX_INPUT_SIZE: usize = 1024;
+pub const MAX_INPUT_SIZE: usize = 512;
 /// Largest channel count of one layer accepted from config.
 pub const MAX_LAYER_CHANNELS: usize = 4096;
 /// Most layers of one model.
@@ -110,7 +110,8 @@ pub struct CnnConfig {
     pub input: String,
     /// How the input size is chosen.
     pub input_size_policy: InputSizePolicy,
-    /// Input side, pixels, for the `fixed` policy (16..=1024).
+    /// Input side, pixels, for the `fixed` policy (16..=512; the `patch` policy is capped
+    /// at 512 too, as the tracker's patch side).
     pub input_size: usize,
     /// Colour plane order of the input.
     pub channel_order: ChannelOrder,
@@ -132,6 +133,9 @@ pub struct CnnConfig {
     /// One network pass on the largest scale's patch per frame, the other scales' maps
     /// resampled from it (true), instead of one pass per scale (false: S passes per frame).
     pub single_pass_scales: bool,
+    /// Train on the winning scale's detection features shifted onto the new position (one
+    /// network pass per frame fewer, as ECO) instead of a fresh pass at the new position.
+    pub train_from_detection: bool,
 }
 
 impl Default for CnnConfig {
@@ -157,6 +161,7 @@ impl Default for CnnConfig {
             intra_threads: 1,
             device: CnnDevice::Cpu,
             single_pass_scales: false,
+            train_from_detection: false,
         }
     }
 }
@@ -200,7 +205,7 @@ impl CnnConfig {
             (16..=MAX_INPUT_SIZE).contains(&self.input_size),
             "features.cnn.input_size",
             self.input_size,
-            "16..=1024 pixels",
+            "16..=512 pixels",
         )?;
         check(
             self.value_scale.is_finite() && self.value_scale > 0.0,

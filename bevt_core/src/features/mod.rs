@@ -94,6 +94,13 @@ pub trait FeatureExtractor: Send {
         patch_side
     }
 
+    /// Whether the training sample may be the winning scale's detection features shifted
+    /// (in the Fourier domain) onto the new position, instead of a fresh extraction at the
+    /// new position (as ECO does): saves one extraction per frame.
+    fn train_from_detection(&self) -> bool {
+        false
+    }
+
     /// Whether [`Self::extract_scales`] is supported: the tracker then extracts all scales of
     /// a frame from one pass on the largest scale's patch.
     fn single_pass_scales(&self) -> bool {
