@@ -1,7 +1,7 @@
 //! Configuration of CNN features (`features.cnn`), independent of the backbone.
 //!
 //! Always compiled, so every build parses and validates the same YAML; the extractor itself
-//! ([`crate::features::cnn`]) needs the `cnn` cargo feature. A model is described by its
+//! (`crate::features::cnn`) needs the `cnn` cargo feature. A model is described by its
 //! file, how a patch becomes its input tensor (size, channel order, value range and
 //! normalisation) and which outputs are used, each as one layer with its own filter and
 //! response weight (ALGORITHM.md §2).
