@@ -12,7 +12,8 @@ use bevt_msgs::std_msgs::Header;
 use bevt_msgs::vision_msgs::Detection2DArray;
 use bevt_msgs::RosType;
 use ros2_client::{
-    Client, Context, MessageTypeName, Node, NodeName, NodeOptions, ServiceTypeName, Subscription,
+    Client, Context, MessageTypeName, Node, NodeName, NodeOptions, RmwRequestId, ServiceTypeName,
+    Subscription,
 };
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -136,7 +137,17 @@ pub struct GroundStation {
     client: Client<ReinitRequest, ReinitResponse>,
     detections: Subscription<Detection2DArray>,
     status: Subscription<TrackStatus>,
+    /// Earlier attempts of a [`Self::reinit`] call that was answered through another
+    /// attempt: their late replies are not handed to [`Self::take_reinit_replies`].
+    superseded: Mutex<Vec<RmwRequestId>>,
 }
+
+/// First wait for a `reinit` reply before the request is sent again; doubled per attempt.
+const REINIT_RETRY_FIRST: Duration = Duration::from_secs(2);
+/// Longest wait between two attempts of one `reinit` call.
+const REINIT_RETRY_MAX: Duration = Duration::from_secs(4);
+/// Superseded request ids remembered (oldest forgotten first).
+const MAX_SUPERSEDED: usize = 64;
 
 impl GroundStation {
     /// Connects to the node described by `settings`.
@@ -198,27 +209,45 @@ impl GroundStation {
             client,
             detections,
             status,
+            superseded: Mutex::new(Vec::new()),
         })
     }
 
-    /// Calls `reinit`, retrying the send until `timeout` (the first requests may be lost
-    /// while discovery completes). `None` on timeout.
+    /// Calls `reinit`, sending the request again until `timeout` (the first requests may be
+    /// lost while discovery completes), with a doubling wait between attempts so a slow
+    /// node is not sent duplicates. A reply to any attempt answers the call; the other
+    /// attempts' late replies are dropped. `None` on timeout.
+    ///
+    /// Each attempt is a separate request: a node slower than the wait may serve two.
     pub fn reinit(&self, req: &ReinitRequest, timeout: Duration) -> Option<ReinitResponse> {
         let end = Instant::now() + timeout;
-        while Instant::now() < end {
+        let mut sent: Vec<RmwRequestId> = Vec::new();
+        let mut wait = REINIT_RETRY_FIRST;
+        let mut answer = None;
+        'attempts: while Instant::now() < end {
             let Ok(id) = self.client.send_request(req.clone()) else {
                 std::thread::sleep(Duration::from_millis(50));
                 continue;
             };
-            let retry = Instant::now() + Duration::from_millis(500);
+            sent.push(id);
+            let retry = Instant::now() + wait;
+            wait = (wait * 2).min(REINIT_RETRY_MAX);
             while Instant::now() < retry.min(end) {
                 match self.client.receive_response() {
-                    Ok(Some((rid, resp))) if rid == id => return Some(resp),
+                    Ok(Some((rid, resp))) if sent.contains(&rid) => {
+                        sent.retain(|s| *s != rid);
+                        answer = Some(resp);
+                        break 'attempts;
+                    }
                     _ => std::thread::sleep(Duration::from_millis(5)),
                 }
             }
         }
-        None
+        let mut superseded = self.superseded.lock().unwrap_or_else(|e| e.into_inner());
+        superseded.extend(sent);
+        let excess = superseded.len().saturating_sub(MAX_SUPERSEDED);
+        superseded.drain(..excess);
+        answer
     }
 
     /// Sends one `reinit` request without waiting (for bursts); false when it could not be
@@ -229,9 +258,14 @@ impl GroundStation {
 
     /// `reinit` replies received so far (non-blocking).
     pub fn take_reinit_replies(&self) -> Vec<ReinitResponse> {
+        let mut superseded = self.superseded.lock().unwrap_or_else(|e| e.into_inner());
         let mut out = Vec::new();
-        while let Ok(Some((_, r))) = self.client.receive_response() {
-            out.push(r);
+        while let Ok(Some((id, r))) = self.client.receive_response() {
+            if let Some(i) = superseded.iter().position(|s| *s == id) {
+                superseded.swap_remove(i);
+            } else {
+                out.push(r);
+            }
         }
         out
     }
