@@ -5,13 +5,16 @@
 #![allow(missing_docs, clippy::unwrap_used, clippy::expect_used)]
 
 use bevt_core::eval::synth::SynthParams;
+use bevt_core::features::colornames::{cell_colornames, CN_CHANNELS};
 use bevt_core::features::{FeatureExtractor, FeatureMap, Hog};
 use bevt_core::fft::Fft2;
 use bevt_core::filter::admm::{AdmmSolver, CropBox};
 use bevt_core::filter::label::reg_window;
 use bevt_core::filter::peak::{subpixel_peak, NewtonScratch};
 use bevt_core::filter::response::{fused_response, LayerSlot};
+use bevt_core::filter::shift::{apply_phase, shift_phase};
 use bevt_core::image::{Patch, Sampler};
+use bevt_core::scale_filter::ScaleFilter;
 use bevt_core::verify::{consensus_score, ConsensusNorm};
 use bevt_core::{BevtTracker, Frame, GridSize, PixelFormat, Size2, Tracker, TrackerConfig};
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -63,6 +66,22 @@ fn stages(c: &mut Criterion) {
                 hog.extract(&patch, CELL, &mut feat).unwrap();
             }
             black_box(&feat);
+        })
+    });
+
+    let mut hog_only = Hog::new(CELL, false);
+    let mut hog_feat = FeatureMap::new(grid, hog_only.channels());
+    c.bench_function("features: fHOG alone, one patch", |b| {
+        b.iter(|| {
+            hog_only.extract(&patch, CELL, &mut hog_feat).unwrap();
+            black_box(&hog_feat);
+        })
+    });
+    let mut cn = vec![0.0f32; CN_CHANNELS * grid.len()];
+    c.bench_function("features: colour names (10 channels), one patch", |b| {
+        b.iter(|| {
+            cell_colornames(&patch, CELL, GRID, GRID, &mut cn);
+            black_box(&cn);
         })
     });
 
@@ -128,6 +147,30 @@ fn stages(c: &mut Criterion) {
         })
     });
 
+    let mut phase = vec![Complex32::default(); bins];
+    let mut shifted = vec![Complex32::default(); CHANNELS * bins];
+    c.bench_function("training sample: Fourier shift of 32 channels", |b| {
+        b.iter(|| {
+            shift_phase(grid, 1.3, -0.7, &mut phase);
+            apply_phase(&xf, &phase, &mut shifted);
+            black_box(&shifted);
+        })
+    });
+
+    let sf_params = spec.scale_filter.clone();
+    let mut sf = ScaleFilter::new(&sf_params, 3).unwrap();
+    let size = f0.truth.size();
+    sf.train(&frame, center, size).unwrap();
+    c.bench_function(
+        "scale filter: estimate + train (17 samples, 33 scales)",
+        |b| {
+            b.iter(|| {
+                black_box(sf.estimate(&frame, center, size).unwrap());
+                sf.train(&frame, center, size).unwrap();
+            })
+        },
+    );
+
     let other: Vec<f32> = resp.iter().rev().copied().collect();
     let mut scratch = Vec::new();
     c.bench_function("verification: spectral-norm consensus", |b| {
@@ -142,19 +185,31 @@ fn stages(c: &mut Criterion) {
         })
     });
 
-    // A whole update on HD frames (features + FFT + detection + verification + training).
+    // A whole update on HD frames (features + FFT + detection + verification + training),
+    // with the default configuration and with the reference one.
     let frames: Vec<_> = (0..seq.frames).map(|i| seq.frame(i)).collect();
-    let mut tracker = BevtTracker::new(spec);
-    tracker.init(&frame, f0.truth).unwrap();
-    let mut i = 1;
-    c.bench_function("update: one frame, 1280x720, default config", |b| {
-        b.iter(|| {
-            let f = &frames[i];
-            let fr = Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
-            black_box(tracker.update(&fr).unwrap());
-            i = if i + 1 < frames.len() { i + 1 } else { 1 };
-        })
-    });
+    let reference: TrackerConfig =
+        serde_norway::from_str(include_str!("../../config/bevt_reference.yaml")).unwrap();
+    for (name, spec) in [
+        ("default", spec.clone()),
+        ("reference", reference.validate().unwrap()),
+    ] {
+        let mut tracker = BevtTracker::new(spec);
+        tracker.init(&frame, f0.truth).unwrap();
+        let mut i = 1;
+        c.bench_function(
+            &format!("update: one frame, 1280x720, {name} config"),
+            |b| {
+                b.iter(|| {
+                    let f = &frames[i];
+                    let fr =
+                        Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+                    black_box(tracker.update(&fr).unwrap());
+                    i = if i + 1 < frames.len() { i + 1 } else { 1 };
+                })
+            },
+        );
+    }
 }
 
 criterion_group! {

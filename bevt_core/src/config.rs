@@ -10,6 +10,7 @@ use crate::error::ConfigError;
 use crate::features::cnn_config::CnnConfig;
 use crate::filter::admm::{AdmmParams, PenaltyKind};
 use crate::redetect::RedetectParams;
+use crate::scale_filter::ScaleFilterParams;
 use crate::track_state::StateParams;
 use crate::verify::{ConsensusNorm, GateParams, VerificationScore, VerifyParams};
 use serde::{Deserialize, Serialize};
@@ -34,6 +35,9 @@ pub struct FeatureConfig {
     pub hog_cell_size: usize,
     /// Append a grayscale channel (cell-mean luminance) to HOG.
     pub grayscale: bool,
+    /// Append the 10 colour-name channels (cell means of the embedded `w2crs` table) to
+    /// HOG. Colour frames only: on mono8 frames the group is left out for the whole track.
+    pub colornames: bool,
     /// Gain on every feature value (applied with the Hann window). It sets the balance of
     /// the data term against the ADMM penalty μ, and so the scale of the responses that
     /// consensus verification compares (1 = the reference).
@@ -48,6 +52,7 @@ impl Default for FeatureConfig {
             kind: FeatureKind::Hog,
             hog_cell_size: 4,
             grayscale: true,
+            colornames: true,
             gain: 1.0,
             cnn: None,
         }
@@ -97,8 +102,14 @@ pub struct AdmmConfig {
     pub mu_max: f32,
     /// Ridge λ of the `none` penalty (BACF 0.01).
     pub lambda: f32,
-    /// Penalty form: `matrix` (reference), `elementwise` (the paper's eq. 8), `none` (BACF).
+    /// Penalty form: `matrix` (reference), `elementwise` (a diagonal spatial penalty, the
+    /// paper's eq. 8 at the magnitude `spatial_weight`), `none` (BACF).
     pub penalty: PenaltyKind,
+    /// Magnitude κ of the `elementwise` penalty: its h-step divides by `κ·p² + μ`, `p` the
+    /// penalty window (0.1 at the target centre, 0.8 at its edge). The literal eq. 8 is
+    /// κ = 2/T (T = grid cells, ~1/1800): no effect against μ ≥ 1. κ = 100 weighs
+    /// the target edge ~64× the first μ (in the spirit of SRDCF/STRCF weights). Unitless.
+    pub spatial_weight: f32,
     /// Penalty window minimum at the target centre (ref 0.1).
     pub reg_window_min: f32,
     /// Penalty window value at the target edge (ref 0.8).
@@ -113,9 +124,59 @@ impl Default for AdmmConfig {
             beta: 20.0,
             mu_max: 10000.0,
             lambda: 0.01,
-            penalty: PenaltyKind::Matrix,
+            penalty: PenaltyKind::Elementwise,
+            spatial_weight: 10.0,
             reg_window_min: 0.1,
             reg_window_edge: 0.8,
+        }
+    }
+}
+
+/// How the target scale is estimated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ScaleEstimator {
+    /// The reference: translation filter evaluated on `number_of_scales` patches, the best
+    /// peak wins (ALGORITHM.md §5).
+    Search,
+    /// One translation patch, then a separate 1-D scale filter (fDSST style, section
+    /// `scale_filter`).
+    Filter,
+}
+
+/// The separate scale filter (`detection.scale_estimator: filter`), fDSST style.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ScaleFilterConfig {
+    /// Scales sampled per frame (fDSST 17).
+    pub scales: usize,
+    /// Scales after Fourier interpolation (fDSST 33), ≥ `scales`.
+    pub interpolated_scales: usize,
+    /// Ratio between neighbouring interpolated scales (fDSST 1.02).
+    pub step: f32,
+    /// Learning rate of the scale model (fDSST 0.025).
+    pub learning_rate: f32,
+    /// Scale label σ as a fraction of `interpolated_scales` (fDSST 1/16).
+    pub sigma_factor: f32,
+    /// Ridge of the detection denominator (fDSST 0.01).
+    pub lambda: f32,
+    /// Side of each (square) scale sample, pixels (fDSST: area 32·16 = 512 px²).
+    pub sample_side: usize,
+    /// HOG cell of the scale samples, pixels (fDSST 4).
+    pub cell_size: usize,
+}
+
+impl Default for ScaleFilterConfig {
+    fn default() -> Self {
+        Self {
+            scales: 17,
+            interpolated_scales: 33,
+            step: 1.02,
+            learning_rate: 0.025,
+            sigma_factor: 1.0 / 16.0,
+            lambda: 0.01,
+            sample_side: 24,
+            cell_size: 4,
         }
     }
 }
@@ -124,7 +185,10 @@ impl Default for AdmmConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DetectionConfig {
-    /// Scales tried per frame (ref 5).
+    /// `search` (reference: the translation filter on `number_of_scales` patches) or
+    /// `filter` (one patch, separate scale filter).
+    pub scale_estimator: ScaleEstimator,
+    /// Scales tried per frame by `search` (ref 5).
     pub number_of_scales: usize,
     /// Ratio between neighbouring scales (ref 1.01).
     pub scale_step: f32,
@@ -138,12 +202,24 @@ pub struct DetectionConfig {
 impl Default for DetectionConfig {
     fn default() -> Self {
         Self {
+            scale_estimator: ScaleEstimator::Filter,
             number_of_scales: 5,
             scale_step: 1.01,
             newton_iterations: 50,
             scale_penalty: 1.0,
         }
     }
+}
+
+/// Where the training sample of a learned frame comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrainingSample {
+    /// The reference: a new patch at the new position and scale (features and FFT again).
+    Fresh,
+    /// The winning detection sample, circularly shifted by the detected displacement in
+    /// the Fourier domain (as ECO): no second patch, its scale is the detection scale.
+    Shifted,
 }
 
 /// Appearance-model learning rates (ALGORITHM.md §6).
@@ -154,6 +230,9 @@ pub struct LearningConfig {
     pub rate: f32,
     /// Reinforced rate when consensus ≥ `threshold_high` (ref 0.019).
     pub reinforced_rate: f32,
+    /// `fresh` (reference: a new patch at the new position) or `shifted` (the detection
+    /// sample shifted in the Fourier domain, half the feature work).
+    pub training_sample: TrainingSample,
 }
 
 impl Default for LearningConfig {
@@ -161,6 +240,7 @@ impl Default for LearningConfig {
         Self {
             rate: 0.013,
             reinforced_rate: 0.019,
+            training_sample: TrainingSample::Shifted,
         }
     }
 }
@@ -303,6 +383,8 @@ pub struct TrackerConfig {
     pub admm: AdmmConfig,
     /// Detection and scale.
     pub detection: DetectionConfig,
+    /// The separate scale filter (used when `detection.scale_estimator: filter`).
+    pub scale_filter: ScaleFilterConfig,
     /// Learning rates.
     pub learning: LearningConfig,
     /// Consensus verification and the learning gate.
@@ -325,6 +407,7 @@ impl Default for TrackerConfig {
             window: WindowConfig::default(),
             admm: AdmmConfig::default(),
             detection: DetectionConfig::default(),
+            scale_filter: ScaleFilterConfig::default(),
             learning: LearningConfig::default(),
             verification: VerificationConfig::default(),
             confidence: ConfidenceConfig::default(),
@@ -352,6 +435,8 @@ pub struct TrackerSpec {
     pub states: StateParams,
     /// Re-detection parameters.
     pub redetect: RedetectParams,
+    /// Scale-filter parameters.
+    pub scale_filter: ScaleFilterParams,
 }
 
 /// Largest number of re-detection scales.
@@ -550,6 +635,12 @@ impl TrackerConfig {
             a.reg_window_edge,
             "admm.reg_window_min..=1e6",
         )?;
+        check(
+            a.spatial_weight.is_finite() && a.spatial_weight >= 0.0 && a.spatial_weight <= 1e6,
+            "admm.spatial_weight",
+            a.spatial_weight,
+            "[0, 1e6]",
+        )?;
         let d = &self.detection;
         check(
             d.number_of_scales >= 1 && d.number_of_scales <= 33,
@@ -575,6 +666,55 @@ impl TrackerConfig {
             "detection.scale_penalty",
             d.scale_penalty,
             "(0, 1]",
+        )?;
+        let sf = &self.scale_filter;
+        check(
+            (3..=65).contains(&sf.scales),
+            "scale_filter.scales",
+            sf.scales,
+            "3..=65",
+        )?;
+        check(
+            sf.interpolated_scales >= sf.scales && sf.interpolated_scales <= 257,
+            "scale_filter.interpolated_scales",
+            sf.interpolated_scales,
+            "scale_filter.scales..=257",
+        )?;
+        check(
+            sf.step.is_finite() && sf.step > 1.0 && sf.step < 1.5,
+            "scale_filter.step",
+            sf.step,
+            "(1, 1.5)",
+        )?;
+        check(
+            sf.learning_rate.is_finite() && sf.learning_rate > 0.0 && sf.learning_rate <= 1.0,
+            "scale_filter.learning_rate",
+            sf.learning_rate,
+            "(0, 1]",
+        )?;
+        check(
+            finite_pos(sf.sigma_factor) && sf.sigma_factor <= 10.0,
+            "scale_filter.sigma_factor",
+            sf.sigma_factor,
+            "(0, 10]",
+        )?;
+        check(
+            sf.lambda.is_finite() && sf.lambda >= 0.0,
+            "scale_filter.lambda",
+            sf.lambda,
+            ">= 0",
+        )?;
+        check(
+            (1..=16).contains(&sf.cell_size),
+            "scale_filter.cell_size",
+            sf.cell_size,
+            "1..=16 pixels",
+        )?;
+        check(
+            sf.sample_side >= 2 * sf.cell_size && sf.sample_side <= 256,
+            "scale_filter.sample_side",
+            sf.sample_side,
+            "2·scale_filter.cell_size..=256 pixels",
         )?;
         let l = &self.learning;
         check(
@@ -720,6 +860,17 @@ impl TrackerConfig {
                 mu_max: a.mu_max,
                 lambda: a.lambda,
                 penalty: a.penalty,
+                spatial_weight: a.spatial_weight,
+            },
+            scale_filter: ScaleFilterParams {
+                scales: sf.scales,
+                interpolated_scales: sf.interpolated_scales,
+                step: sf.step,
+                learning_rate: sf.learning_rate,
+                sigma_factor: sf.sigma_factor,
+                lambda: sf.lambda,
+                sample_side: sf.sample_side,
+                cell: sf.cell_size,
             },
             verify: VerifyParams {
                 norm: v.norm,
@@ -778,6 +929,39 @@ mod tests {
         let mut c = TrackerConfig::default();
         c.detection.scale_step = f32::NAN;
         assert!(c.validate().is_err());
+        for (set, key) in [
+            (
+                (|c: &mut TrackerConfig| c.admm.spatial_weight = -1.0) as fn(&mut TrackerConfig),
+                "admm.spatial_weight",
+            ),
+            (|c| c.scale_filter.scales = 1, "scale_filter.scales"),
+            (
+                |c| c.scale_filter.interpolated_scales = 5,
+                "scale_filter.interpolated_scales",
+            ),
+            (|c| c.scale_filter.step = 1.0, "scale_filter.step"),
+            (
+                |c| c.scale_filter.learning_rate = 0.0,
+                "scale_filter.learning_rate",
+            ),
+            (
+                |c| c.scale_filter.sigma_factor = f32::NAN,
+                "scale_filter.sigma_factor",
+            ),
+            (|c| c.scale_filter.lambda = -0.1, "scale_filter.lambda"),
+            (|c| c.scale_filter.cell_size = 0, "scale_filter.cell_size"),
+            (
+                |c| c.scale_filter.sample_side = 6,
+                "scale_filter.sample_side",
+            ),
+        ] {
+            let mut c = TrackerConfig::default();
+            set(&mut c);
+            match c.validate() {
+                Err(ConfigError::OutOfRange { field, .. }) => assert_eq!(field, key),
+                other => panic!("{key}: {other:?}"),
+            }
+        }
         let mut c = TrackerConfig::default();
         c.verification.threshold_high = 0.1;
         assert!(matches!(c.validate(), Err(ConfigError::Inconsistent(_))));
@@ -906,19 +1090,55 @@ mod tests {
     }
 
     #[test]
+    fn reference_yaml_keeps_the_reference() {
+        let text = include_str!("../../config/bevt_reference.yaml");
+        let c: TrackerConfig = serde_norway::from_str(text).unwrap();
+        c.validate().unwrap();
+        assert!(!c.features.colornames);
+        assert_eq!(c.detection.scale_estimator, ScaleEstimator::Search);
+        assert_eq!(c.detection.number_of_scales, 5);
+        assert_eq!(c.detection.scale_step, 1.01);
+        assert_eq!(c.admm.penalty, PenaltyKind::Matrix);
+        assert_eq!(c.learning.training_sample, TrainingSample::Fresh);
+        assert_eq!(
+            (c.learning.rate, c.learning.reinforced_rate),
+            (0.013, 0.019)
+        );
+        let v = &c.verification;
+        assert!(v.enabled);
+        assert_eq!(v.norm, ConsensusNorm::Spectral);
+        assert_eq!(v.score, VerificationScore::Reference);
+        assert_eq!((v.threshold_low, v.threshold_high), (0.2, 0.5));
+        assert!(!c.redetection.enabled);
+        assert_eq!(c.track_state.lost_threshold, 0.0);
+    }
+
+    #[test]
     fn missing_keys_take_defaults_and_unknown_keys_are_rejected() {
         let c: TrackerConfig = serde_norway::from_str("admm:\n  iterations: 2\n").unwrap();
         assert_eq!(c.admm.iterations, 2);
         assert_eq!(c.detection, DetectionConfig::default());
         assert!(serde_norway::from_str::<TrackerConfig>("admm:\n  iteratons: 2\n").is_err());
         assert!(serde_norway::from_str::<TrackerConfig>("admm:\n  penalty: bogus\n").is_err());
+        assert!(
+            serde_norway::from_str::<TrackerConfig>("detection:\n  scale_estimator: dsst\n")
+                .is_err()
+        );
+        assert!(serde_norway::from_str::<TrackerConfig>("features:\n  colornames: 3\n").is_err());
+        assert!(
+            serde_norway::from_str::<TrackerConfig>("learning:\n  training_sample: new\n").is_err()
+        );
+        assert!(serde_norway::from_str::<TrackerConfig>("scale_filter:\n  scals: 3\n").is_err());
     }
 
     #[test]
     fn yaml_round_trips() {
         let mut c = TrackerConfig::default();
-        c.admm.penalty = PenaltyKind::Elementwise;
+        c.admm.penalty = PenaltyKind::Matrix;
         c.verification.norm = ConsensusNorm::FrobeniusSq;
+        c.detection.scale_estimator = ScaleEstimator::Search;
+        c.features.colornames = !c.features.colornames;
+        c.learning.training_sample = TrainingSample::Fresh;
         let s = serde_norway::to_string(&c).unwrap();
         let d: TrackerConfig = serde_norway::from_str(&s).unwrap();
         assert_eq!(c, d);

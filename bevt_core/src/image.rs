@@ -221,7 +221,6 @@ pub struct Sampler {
     ox: f32,
     oy: f32,
     rowsum: Vec<f32>,
-    col_off: Vec<usize>,
 }
 
 impl Sampler {
@@ -267,23 +266,44 @@ impl Sampler {
         let sx0 = x0 as isize;
         let sy0 = y0 as isize;
         let inv = 1.0 / (f * f);
-        // Source columns of the region, clamped (border replication), as byte offsets.
+        // Region columns `0..wide`: those left of the frame replicate column 0, those right
+        // of it column `fw − 1`, the span `left..right` is read in place, sequentially.
         let wide = w * factor;
-        self.col_off.clear();
-        self.col_off
-            .extend((0..wide).map(|i| ((sx0 + i as isize).clamp(0, fw - 1) as usize) * bpp));
-        let col_off = &self.col_off;
+        let left = (-sx0).clamp(0, wide as isize) as usize;
+        let right = (fw - sx0).clamp(left as isize, wide as isize) as usize;
+        let first_x = (sx0 + left as isize).clamp(0, fw - 1) as usize;
         for r in 0..h {
             self.rowsum.iter_mut().for_each(|v| *v = 0.0);
             for k in 0..factor {
                 let sy = (sy0 + (r * factor + k) as isize).clamp(0, fh - 1) as usize;
-                let row = &data[sy * stride..];
-                for p in 0..planes {
-                    let o = offs[p];
-                    let acc = &mut self.rowsum[p * wide..(p + 1) * wide];
-                    for (a, &c) in acc.iter_mut().zip(col_off.iter()) {
-                        *a += row[c + o] as f32;
+                let row = &data[sy * stride..sy * stride + fw as usize * bpp];
+                let (first, last) = (&row[..bpp], &row[row.len() - bpp..]);
+                let span = &row[first_x * bpp..first_x * bpp + (right - left) * bpp];
+                if planes == 3 {
+                    let (a0, rest) = self.rowsum.split_at_mut(wide);
+                    let (a1, a2) = rest.split_at_mut(wide);
+                    let [o0, o1, o2] = offs;
+                    for (((x, y), z), px) in a0[left..right]
+                        .iter_mut()
+                        .zip(&mut a1[left..right])
+                        .zip(&mut a2[left..right])
+                        .zip(span.chunks_exact(bpp))
+                    {
+                        *x += px[o0] as f32;
+                        *y += px[o1] as f32;
+                        *z += px[o2] as f32;
                     }
+                } else {
+                    let a0 = &mut self.rowsum[..wide];
+                    for (a, px) in a0[left..right].iter_mut().zip(span.chunks_exact(bpp)) {
+                        *a += px[offs[0]] as f32;
+                    }
+                }
+                for p in 0..planes {
+                    let acc = &mut self.rowsum[p * wide..(p + 1) * wide];
+                    let (vl, vr) = (first[offs[p]] as f32, last[offs[p]] as f32);
+                    acc[..left].iter_mut().for_each(|a| *a += vl);
+                    acc[right..].iter_mut().for_each(|a| *a += vr);
                 }
             }
             for p in 0..planes {
@@ -300,28 +320,6 @@ impl Sampler {
         }
     }
 
-    /// True when a square of side `region` around `center` lies inside the prepared
-    /// intermediate and the prepared anti-aliasing factor suits it, so [`Self::sample`] can
-    /// be used without another [`Self::prepare`].
-    pub fn covers(&self, center: Point2, region: f32, out_side: usize) -> bool {
-        if self.inter.is_empty() {
-            return false;
-        }
-        let ratio = region / out_side.max(1) as f32;
-        let factor = if ratio >= 2.0 {
-            ratio.floor() as usize
-        } else {
-            1
-        };
-        let f = self.factor as f32;
-        let half = region / 2.0 + f;
-        factor == self.factor
-            && center.x - half >= self.ox
-            && center.y - half >= self.oy
-            && center.x + half <= self.ox + self.inter_w as f32 * f
-            && center.y + half <= self.oy + self.inter_h as f32 * f
-    }
-
     /// Samples a square of side `region` frame pixels centred on `center` (which must lie in
     /// the prepared region) into `out` (side `out.side`).
     ///
@@ -329,26 +327,33 @@ impl Sampler {
     /// is low-pass filtered alike and none aliases more than another); upscaling is
     /// bilinear.
     pub fn sample(&self, center: Point2, region: f32, out: &mut Patch) {
+        self.sample_rect(center, region, region, out);
+    }
+
+    /// As [`Self::sample`] for a `region_w × region_h` rectangle, stretched onto the square
+    /// patch (prepare with the shorter side as `min_region`; aspect ratios up to
+    /// [`MAX_SAMPLE_ASPECT`] are resampled exactly, longer footprints lose their far taps).
+    pub fn sample_rect(&self, center: Point2, region_w: f32, region_h: f32, out: &mut Patch) {
         let side = out.side;
         out.planes = self.planes;
         out.data.resize(side * side * self.planes, 0.0);
         let f = self.factor as f32;
-        let k = region / side as f32;
+        let (kx, ky) = (region_w / side as f32, region_h / side as f32);
         let (w, h) = (self.inter_w, self.inter_h);
         // Output pixel j's centre in frame edge coordinates: center + (j + 0.5 − side/2)·k;
         // in intermediate pixel-centre coordinates: (X − origin)/f − 0.5. Footprint width k/f.
-        let width = k / f;
-        let map =
-            |c: f32, o: f32, j: usize| (c + (j as f32 + 0.5 - side as f32 / 2.0) * k - o) / f - 0.5;
+        let map = |c: f32, o: f32, j: usize, k: f32| {
+            (c + (j as f32 + 0.5 - side as f32 / 2.0) * k - o) / f - 0.5
+        };
         out.cols.clear();
         for j in 0..side {
             out.cols
-                .push(Taps::new(map(center.x, self.ox, j), width, w));
+                .push(Taps::new(map(center.x, self.ox, j, kx), kx / f, w));
         }
         out.rows.clear();
         for r in 0..side {
             out.rows
-                .push(Taps::new(map(center.y, self.oy, r), width, h));
+                .push(Taps::new(map(center.y, self.oy, r, ky), ky / f, h));
         }
         let cmin = out.cols.iter().map(|t| t.start).min().unwrap_or(0);
         let cmax = out
@@ -383,7 +388,10 @@ impl Sampler {
 }
 
 /// Most source pixels one output pixel reads along one axis.
-const MAX_TAPS: usize = 6;
+const MAX_TAPS: usize = 8;
+/// Largest aspect ratio [`Sampler::sample_rect`] resamples exactly (footprints of up to
+/// `2·MAX_SAMPLE_ASPECT` source pixels plus one partial tap fit in the 8 taps per axis).
+pub const MAX_SAMPLE_ASPECT: f32 = 3.0;
 
 /// Resampling weights of one output pixel along one axis.
 #[derive(Debug, Clone, Copy)]
@@ -536,6 +544,38 @@ mod tests {
         s.sample(c, 64.0, &mut p);
         let mean_out = p.data.iter().sum::<f32>() / p.data.len() as f32;
         assert!((mean_in - mean_out).abs() < 2.0, "{mean_in} {mean_out}");
+    }
+
+    #[test]
+    fn prepared_region_is_the_clamped_box_average_across_the_border() {
+        // A region hanging over the top-left and right edges, factor 3, colour with alpha.
+        let (w, h) = (20, 12);
+        let d: Vec<u8> = (0..w * h * 4).map(|i| ((i * 29) % 253) as u8).collect();
+        let f = Frame::packed(&d, w, h, PixelFormat::Bgra8).unwrap();
+        let mut s = Sampler::default();
+        let c = Point2 { x: 6.0, y: 2.0 };
+        s.prepare(&f, c, 30.0, 36.0, 10);
+        assert_eq!(s.factor, 3);
+        let px = |x: isize, y: isize, p: usize| {
+            let (x, y) = (x.clamp(0, w as isize - 1), y.clamp(0, h as isize - 1));
+            d[(y as usize * w + x as usize) * 4 + [2, 1, 0][p]] as f32
+        };
+        for p in 0..3 {
+            for r in 0..s.inter_h {
+                for col in 0..s.inter_w {
+                    let mut sum = 0.0;
+                    for dy in 0..3 {
+                        for dx in 0..3 {
+                            let x = s.ox as isize + (col * 3 + dx) as isize;
+                            let y = s.oy as isize + (r * 3 + dy) as isize;
+                            sum += px(x, y, p);
+                        }
+                    }
+                    let got = s.inter[(p * s.inter_h + r) * s.inter_w + col];
+                    assert!((got - sum / 9.0).abs() < 1e-3, "{p} {r} {col}");
+                }
+            }
+        }
     }
 
     #[test]

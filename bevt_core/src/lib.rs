@@ -48,6 +48,7 @@ pub mod geometry;
 pub mod image;
 pub mod redetect;
 pub mod scale;
+pub mod scale_filter;
 pub mod track_state;
 pub mod tracker;
 pub mod verify;

@@ -6,17 +6,19 @@
 mod lost;
 
 use crate::confidence::{psr, ConfidenceModel, Measures};
-use crate::config::{FeatureKind, TrackerSpec};
+use crate::config::{FeatureKind, ScaleEstimator, TrackerSpec, TrainingSample};
 use crate::error::TrackError;
 use crate::features::{FeatureExtractor, FeatureMap, Hog};
-use crate::fft::{fftshift, shift_spectrum, Fft2};
+use crate::fft::{fftshift, Fft2};
 use crate::filter::admm::{AdmmSolver, CropBox};
 use crate::filter::label::{gaussian_label, hann2d, label_sigma, reg_window};
 use crate::filter::peak::{subpixel_peak, NewtonScratch, Peak};
 use crate::filter::response::{fused_response, LayerSlot};
+use crate::filter::shift::{apply_phase, shift_phase};
 use crate::geometry::{BBox, GridSize, Point2, Size2};
 use crate::image::{Frame, Patch, PixelFormat, Sampler};
 use crate::scale::{scale_factors, scale_limits};
+use crate::scale_filter::ScaleFilter;
 use crate::track_state::{StateMachine, StateReason, TrackState};
 use crate::verify::{
     consensus_score, update_ideal, verdict, LearningGate, Verdict, VerificationScore,
@@ -26,9 +28,6 @@ use serde::{Deserialize, Serialize};
 
 /// Smallest accepted target side at initialisation, pixels.
 pub const MIN_TARGET_SIDE: f32 = 4.0;
-/// The detection region is prepared this much larger than the largest scale so the
-/// training sample (new position and scale) usually falls inside it.
-const TRAIN_REUSE_MARGIN: f32 = 1.15;
 /// Smallest feature grid side, cells.
 const MIN_GRID: usize = 4;
 
@@ -277,6 +276,10 @@ struct State {
     /// arg-max (1 everywhere with the reference setting).
     scale_weights: Vec<f32>,
     sampler: Sampler,
+    /// The separate scale filter (`detection.scale_estimator: filter`).
+    scale_filter: Option<ScaleFilter>,
+    /// Phase factors of the shifted training sample.
+    phase: Vec<Complex32>,
     norm_scratch: Vec<f64>,
     pos: Point2,
     scale: f32,
@@ -289,6 +292,13 @@ struct State {
 }
 
 impl State {
+    /// Target size at the current scale, frame pixels.
+    fn target_size(&self) -> Size2 {
+        Size2 {
+            w: self.geo.base_target.w * self.scale,
+            h: self.geo.base_target.h * self.scale,
+        }
+    }
     /// Trains all layers' filters on `model_xf`.
     fn train(&mut self) {
         let bins = self.bins;
@@ -303,7 +313,8 @@ impl State {
         }
     }
 
-    /// Training features at the current position and scale into worker 0.
+    /// Training features at the current position and scale into worker 0, from a freshly
+    /// prepared region (as the reference extracts a new patch).
     fn training_sample(&mut self, frame: &Frame<'_>) -> Result<(), TrackError> {
         let region = self.geo.patch_side as f32 * self.scale;
         self.sampler
@@ -373,7 +384,11 @@ impl BevtTracker {
     fn build_extractor(spec: &TrackerSpec) -> Result<Box<dyn FeatureExtractor>, TrackError> {
         let f = &spec.config.features;
         match f.kind {
-            FeatureKind::Hog => Ok(Box::new(Hog::new(f.hog_cell_size, f.grayscale))),
+            FeatureKind::Hog => Ok(Box::new(Hog::with_colornames(
+                f.hog_cell_size,
+                f.grayscale,
+                f.colornames,
+            ))),
             #[cfg(feature = "cnn")]
             FeatureKind::Cnn => {
                 let c = f.cnn.as_ref().ok_or_else(|| {
@@ -463,6 +478,10 @@ impl BevtTracker {
     ) -> Result<Box<State>, TrackError> {
         let spec = &self.spec;
         let cfg = &spec.config;
+        let planes = frame.format().planes();
+        // Colour-dependent groups (colour names) follow the frame format, fixed per track.
+        let mut ex = ex.boxed_clone();
+        ex.set_input_planes(planes);
         let geo = Geometry::new(spec, b.size(), ex.cell_size(), ex.allows_smaller_cells())?;
         let grid = geo.grid;
         let mut fft = Fft2::new(grid);
@@ -493,8 +512,18 @@ impl BevtTracker {
             start += l.channels;
         }
         let channels = start;
-        let planes = frame.format().planes();
-        let factors = scale_factors(cfg.detection.number_of_scales, cfg.detection.scale_step);
+        let (factors, scale_filter, step) = match cfg.detection.scale_estimator {
+            ScaleEstimator::Search => (
+                scale_factors(cfg.detection.number_of_scales, cfg.detection.scale_step),
+                None,
+                cfg.detection.scale_step,
+            ),
+            ScaleEstimator::Filter => (
+                vec![1.0],
+                Some(ScaleFilter::new(&spec.scale_filter, planes)?),
+                spec.scale_filter.step,
+            ),
+        };
         let workers = factors
             .iter()
             .map(|_| ScaleWorker::new(&geo, ex.boxed_clone(), planes))
@@ -512,7 +541,7 @@ impl BevtTracker {
             geo.patch_side as f32,
             (frame.width() as f32, frame.height() as f32),
             (geo.base_target.w, geo.base_target.h),
-            cfg.detection.scale_step,
+            step,
         );
         let scale = geo.s0;
         Ok(Box::new(State {
@@ -533,7 +562,9 @@ impl BevtTracker {
             resp: vec![0.0; grid.len()],
             workers,
             shared,
-            train_xf: if ex.train_from_detection() {
+            train_xf: if ex.train_from_detection()
+                || cfg.learning.training_sample == TrainingSample::Shifted
+            {
                 vec![Complex32::default(); channels * bins]
             } else {
                 Vec::new()
@@ -548,6 +579,8 @@ impl BevtTracker {
                 .collect(),
             factors,
             sampler: Sampler::default(),
+            scale_filter,
+            phase: vec![Complex32::default(); bins],
             norm_scratch: Vec::new(),
             pos: b.center(),
             scale,
@@ -655,6 +688,10 @@ impl Tracker for BevtTracker {
         st.training_sample(frame)?;
         st.model_xf.copy_from_slice(&st.workers[0].xf);
         st.train();
+        let size = st.target_size();
+        if let Some(sf) = st.scale_filter.as_mut() {
+            sf.train(frame, st.pos, size)?;
+        }
         st.ideal_response();
         let initial_peak = st.m_ideal.iter().copied().fold(0.0f32, f32::max);
         st.confidence = ConfidenceModel::new(self.spec.confidence, initial_peak);
@@ -681,12 +718,13 @@ impl Tracker for BevtTracker {
         let side = st.geo.patch_side as f32;
         let fmin = st.factors.iter().copied().fold(f32::INFINITY, f32::min);
         let fmax = st.factors.iter().copied().fold(0.0, f32::max);
-        // A margin around the largest scale lets the training sample reuse this region.
+        // Exactly the detection region: a fresh training sample prepares its own (reusing
+        // this one changes the reference's resampling grid), a shifted one needs none.
         st.sampler.prepare(
             frame,
             st.pos,
             side * st.scale * fmin,
-            side * st.scale * fmax * TRAIN_REUSE_MARGIN,
+            side * st.scale * fmax,
             st.input_side,
         );
         Self::detect_all(st, cfg.threads, cfg.detection.newton_iterations)?;
@@ -713,6 +751,14 @@ impl Tracker for BevtTracker {
             st.pos = new_pos;
         }
         st.scale = (st.scale * factor).clamp(st.min_scale, st.max_scale);
+        if let Some(sf) = st.scale_filter.as_mut() {
+            let size = Size2 {
+                w: st.geo.base_target.w * st.scale,
+                h: st.geo.base_target.h * st.scale,
+            };
+            let change = sf.estimate(frame, st.pos, size)?;
+            st.scale = (st.scale * change).clamp(st.min_scale, st.max_scale);
+        }
 
         // Consensus verification on the winning scale's response.
         fftshift(&st.workers[best].resp, st.geo.grid, &mut st.m_curr);
@@ -771,17 +817,20 @@ impl Tracker for BevtTracker {
                     st.training_sample(frame)?;
                     &st.workers[0].xf
                 } else {
-                    // The winning scale's features, moved onto the new position.
-                    st.train_xf.copy_from_slice(&st.workers[best].xf);
-                    for ch in st.train_xf.chunks_exact_mut(st.bins) {
-                        shift_spectrum(ch, st.geo.grid, peak.dy, peak.dx);
-                    }
+                    // The winning scale's features, moved onto the new position
+                    // (`learning.training_sample: shifted`, or the extractor asks for it).
+                    shift_phase(st.geo.grid, peak.dy, peak.dx, &mut st.phase);
+                    apply_phase(&st.workers[best].xf, &st.phase, &mut st.train_xf);
                     &st.train_xf
                 };
                 for (m, x) in st.model_xf.iter_mut().zip(sample) {
                     *m = *m * (1.0 - rate) + x * rate;
                 }
                 st.train();
+                let size = st.target_size();
+                if let Some(sf) = st.scale_filter.as_mut() {
+                    sf.train(frame, st.pos, size)?;
+                }
                 true
             }
         };

@@ -25,6 +25,19 @@ fn stats(seq: &SynthParams, cfg: TrackerConfig, init: BBox) -> (f32, f32, f32) {
     (max_err, mean_scale, max_scale)
 }
 
+/// The authors' reference settings (as config/bevt_reference.yaml): fHOG + gray, the
+/// 5-scale search, the `matrix` penalty, a fresh training patch.
+fn reference() -> TrackerConfig {
+    use bevt_core::config::{ScaleEstimator, TrainingSample};
+    use bevt_core::filter::admm::PenaltyKind;
+    let mut c = TrackerConfig::default();
+    c.features.colornames = false;
+    c.detection.scale_estimator = ScaleEstimator::Search;
+    c.admm.penalty = PenaltyKind::Matrix;
+    c.learning.training_sample = TrainingSample::Fresh;
+    c
+}
+
 fn moving_scaling() -> SynthParams {
     SynthParams {
         width: 480,
@@ -39,7 +52,12 @@ fn moving_scaling() -> SynthParams {
 #[test]
 fn tracks_a_translating_scaling_target_over_a_moving_background() {
     let seq = moving_scaling();
+    // The default (scale filter): within 2 px and 3 % on every frame.
     let (err, mean_scale, max_scale) = stats(&seq, TrackerConfig::default(), seq.truth(0));
+    assert!(err < 2.0, "centre error {err}");
+    assert!(mean_scale < 0.03, "mean scale error {mean_scale}");
+    assert!(max_scale < 0.03, "max scale error {max_scale}");
+    let (err, mean_scale, max_scale) = stats(&seq, reference(), seq.truth(0));
     assert!(err < 2.0, "centre error {err}");
     // The reference 5-scale search moves at most 2 % per frame in 1 % steps and jitters by
     // a step or two: the mean stays under 3 %, single frames under 6 %.
@@ -145,4 +163,94 @@ fn consensus_drops_when_the_target_disappears() {
     assert!(after
         .iter()
         .all(|o| o.consensus > 0.0 && o.consensus <= 1.0));
+}
+
+/// Every fast-mode addition on top of [`reference`]: the default configuration.
+fn variants_all(c: &mut TrackerConfig) {
+    use bevt_core::config::{ScaleEstimator, TrainingSample};
+    use bevt_core::filter::admm::PenaltyKind;
+    c.features.colornames = true;
+    c.detection.scale_estimator = ScaleEstimator::Filter;
+    c.learning.training_sample = TrainingSample::Shifted;
+    c.admm.penalty = PenaltyKind::Elementwise;
+}
+
+/// A named change to the reference configuration.
+type Variant = (&'static str, fn(&mut TrackerConfig));
+
+#[test]
+fn each_fast_mode_option_alone_and_together_tracks_a_scaling_target() {
+    use bevt_core::config::{ScaleEstimator, TrainingSample};
+    use bevt_core::filter::admm::PenaltyKind;
+    assert_eq!(
+        {
+            let mut c = reference();
+            variants_all(&mut c);
+            c
+        },
+        TrackerConfig::default()
+    );
+    // ×1.5 over the sequence: beyond what the 5-scale search follows closely.
+    let seq = SynthParams {
+        frames: 60,
+        scale_rate: 1.007,
+        ..moving_scaling()
+    };
+    let variants: [Variant; 5] = [
+        ("colour names", |c| c.features.colornames = true),
+        ("scale filter", |c| {
+            c.detection.scale_estimator = ScaleEstimator::Filter
+        }),
+        ("shifted training sample", |c| {
+            c.learning.training_sample = TrainingSample::Shifted
+        }),
+        ("elementwise penalty", |c| {
+            c.admm.penalty = PenaltyKind::Elementwise
+        }),
+        ("all together (the default)", variants_all),
+    ];
+    for (name, set) in variants {
+        let mut cfg = reference();
+        set(&mut cfg);
+        let (err, mean_scale, _) = stats(&seq, cfg, seq.truth(0));
+        assert!(err < 3.0, "{name}: centre error {err}");
+        assert!(mean_scale < 0.05, "{name}: mean scale error {mean_scale}");
+    }
+}
+
+#[test]
+fn colour_names_on_mono8_frames_track_with_hog_alone() {
+    use bevt_core::{BevtTracker, Frame, PixelFormat, Tracker};
+    let seq = SynthParams {
+        frames: 30,
+        ..moving_scaling()
+    };
+    let mut cfg = TrackerConfig::default();
+    cfg.features.colornames = true;
+    let mut t = BevtTracker::new(cfg.validate().expect("valid"));
+    let grey = |rgb: &[u8]| -> Vec<u8> {
+        rgb.chunks_exact(3)
+            .map(|p| ((p[0] as u32 * 299 + p[1] as u32 * 587 + p[2] as u32 * 114) / 1000) as u8)
+            .collect()
+    };
+    let f0 = seq.frame(0);
+    let g0 = grey(&f0.rgb);
+    let fr = Frame::packed(&g0, seq.width, seq.height, PixelFormat::Mono8).expect("frame");
+    t.init(&fr, f0.truth).expect("init");
+    let mut worst = 0.0f32;
+    for i in 1..seq.frames {
+        let f = seq.frame(i);
+        let g = grey(&f.rgb);
+        let fr = Frame::packed(&g, seq.width, seq.height, PixelFormat::Mono8).expect("frame");
+        let o = t.update(&fr).expect("update");
+        worst = worst.max(o.bbox.center().distance(&f.truth.center()));
+    }
+    assert!(
+        worst < 3.0,
+        "mono8 with colour names requested: centre error {worst}"
+    );
+    // The track's format is fixed: a colour frame now is a mismatch, not a crash.
+    let f = seq.frame(0);
+    let fr = Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).expect("frame");
+    assert!(t.update(&fr).is_err());
 }

@@ -8,8 +8,12 @@
 //! normalisers `n_k = 1/sqrt(energy + ε)`. Channels: 18 sensitive and 9 insensitive bins
 //! `0.5·Σ_k min(h·n_k, 0.2)`, then 4 texture channels `0.2357·Σ_o min(h_o·n_k, 0.2)`.
 //! (Dollár's 32nd, all-zero channel is dropped.)
+//!
+//! Optional groups, in this channel order after the 31 HOG channels: one grayscale channel
+//! ([`gray`]) and the 10 colour-name channels ([`colornames`], colour input only: for a
+//! one-plane input the group is left out, see [`FeatureExtractor::set_input_planes`]).
 
-use super::{gray, FeatureExtractor, FeatureMap, LayerInfo};
+use super::{colornames, gray, FeatureExtractor, FeatureMap, LayerInfo};
 use crate::error::TrackError;
 use crate::image::Patch;
 
@@ -27,6 +31,10 @@ const TEXTURE_WEIGHT: f32 = 0.2357;
 pub struct Hog {
     cell: usize,
     grayscale: bool,
+    /// Colour names requested by the configuration.
+    colornames: bool,
+    /// Colour names produced: requested and the input has colour.
+    cn_active: bool,
     layers: Vec<LayerInfo>,
     hist: Vec<f32>,
     energy: Vec<f32>,
@@ -67,16 +75,19 @@ impl Hog {
     /// An extractor with maximal cell size `cell` (pixels), optionally appending a
     /// grayscale channel.
     pub fn new(cell: usize, grayscale: bool) -> Self {
-        let channels = HOG_CHANNELS + usize::from(grayscale);
-        let name = if grayscale { "hog+gray" } else { "hog" };
+        Self::with_colornames(cell, grayscale, false)
+    }
+
+    /// As [`Hog::new`], optionally appending the 10 colour-name channels (for colour input;
+    /// the input is assumed to have colour until [`FeatureExtractor::set_input_planes`]
+    /// says otherwise).
+    pub fn with_colornames(cell: usize, grayscale: bool, colornames: bool) -> Self {
         Self {
             cell: cell.max(1),
             grayscale,
-            layers: vec![LayerInfo {
-                name: name.into(),
-                channels,
-                weight: 1.0,
-            }],
+            colornames,
+            cn_active: colornames,
+            layers: Self::layer_info(grayscale, colornames),
             hist: Vec::new(),
             energy: Vec::new(),
             norm: Vec::new(),
@@ -87,6 +98,22 @@ impl Hog {
             row_gy: Vec::new(),
             row_m2: Vec::new(),
         }
+    }
+
+    fn layer_info(grayscale: bool, cn: bool) -> Vec<LayerInfo> {
+        let channels =
+            HOG_CHANNELS + usize::from(grayscale) + if cn { colornames::CN_CHANNELS } else { 0 };
+        let name = match (grayscale, cn) {
+            (false, false) => "hog",
+            (true, false) => "hog+gray",
+            (false, true) => "hog+cn",
+            (true, true) => "hog+gray+cn",
+        };
+        vec![LayerInfo {
+            name: name.into(),
+            channels,
+            weight: 1.0,
+        }]
     }
 
     /// Gradient magnitude and orientation bin (0..18) of every pixel.
@@ -247,6 +274,11 @@ impl FeatureExtractor for Hog {
         self.cell
     }
 
+    fn set_input_planes(&mut self, planes: usize) {
+        self.cn_active = self.colornames && planes >= 3;
+        self.layers = Self::layer_info(self.grayscale, self.cn_active);
+    }
+
     fn extract(
         &mut self,
         patch: &Patch,
@@ -306,13 +338,30 @@ impl FeatureExtractor for Hog {
                 }
             }
         }
+        let mut next = HOG_CHANNELS;
         if self.grayscale {
             gray::cell_gray(
                 patch,
                 cell,
                 hb,
                 wb,
-                &mut out.data[HOG_CHANNELS * nb..(HOG_CHANNELS + 1) * nb],
+                &mut out.data[next * nb..(next + 1) * nb],
+            );
+            next += 1;
+        }
+        if self.cn_active {
+            if patch.planes < 3 {
+                return Err(TrackError::Feature(format!(
+                    "colour names need a colour patch, got {} plane(s)",
+                    patch.planes
+                )));
+            }
+            colornames::cell_colornames(
+                patch,
+                cell,
+                hb,
+                wb,
+                &mut out.data[next * nb..(next + colornames::CN_CHANNELS) * nb],
             );
         }
         Ok(())
@@ -437,6 +486,35 @@ mod tests {
             b as usize,
             "{a} {b}"
         );
+    }
+
+    #[test]
+    fn colour_names_add_ten_channels_for_colour_and_none_for_mono() {
+        let mut h = Hog::with_colornames(4, true, true);
+        assert_eq!(h.channels(), 42);
+        assert_eq!(h.layers()[0].name, "hog+gray+cn");
+        h.set_input_planes(1);
+        assert_eq!(h.channels(), 32);
+        let mut p = Patch::new(16, 1);
+        p.data.iter_mut().for_each(|v| *v = 50.0);
+        let mut f = FeatureMap::new(GridSize { h: 4, w: 4 }, 32);
+        h.extract(&p, 4, &mut f).unwrap();
+        h.set_input_planes(3);
+        assert_eq!(h.channels(), 42);
+        // Colour input: the last ten channels are the table row of the (flat) colour.
+        let mut p = Patch::new(16, 3);
+        for (i, v) in p.data.iter_mut().enumerate() {
+            *v = [200.0, 40.0, 90.0][i / 256];
+        }
+        let mut f = FeatureMap::new(GridSize { h: 4, w: 4 }, 42);
+        h.extract(&p, 4, &mut f).unwrap();
+        let row = colornames::table()[colornames::bin_index(200.0, 40.0, 90.0)];
+        for d in 0..10 {
+            assert!(f.channel(32 + d).iter().all(|v| (v - row[d]).abs() < 1e-5));
+        }
+        // A colour-names extractor fed a mono patch without being told is an error.
+        let p = Patch::new(16, 1);
+        assert!(h.extract(&p, 4, &mut f).is_err());
     }
 
     #[test]

@@ -9,6 +9,7 @@
 #[cfg(feature = "cnn")]
 pub mod cnn;
 pub mod cnn_config;
+pub mod colornames;
 pub mod gray;
 pub mod hog;
 
@@ -85,6 +86,14 @@ pub trait FeatureExtractor: Send {
     /// targets (ALGORITHM.md §1). CNN features have a fixed stride and answer false.
     fn allows_smaller_cells(&self) -> bool {
         true
+    }
+
+    /// Tells the extractor how many colour planes its patches will have (3 for colour
+    /// frames, 1 for mono8), before [`Self::layers`] is read for a new track. Groups that
+    /// need colour (colour names) are left out for one plane, so the channel count is fixed
+    /// for the whole track. The default ignores it.
+    fn set_input_planes(&mut self, planes: usize) {
+        let _ = planes;
     }
 
     /// Side of the patch this extractor wants for a search region of `patch_side` pixels

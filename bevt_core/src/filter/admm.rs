@@ -20,7 +20,9 @@ pub enum PenaltyKind {
     /// Reference MATLAB: `h = inv(2RᵀR/T + μI) · IFFT2(μĝ + l̂)`, `R` the penalty window
     /// taken as a matrix (the paper's stated simplification).
     Matrix,
-    /// Eq. 8 with a diagonal penalty: `h = IFFT2(μĝ + l̂) / (2p²/T + μ)`.
+    /// A diagonal spatial penalty (eq. 8 with `p` diagonal) at magnitude κ
+    /// ([`AdmmParams::spatial_weight`]): `h = IFFT2(μĝ + l̂) / (κp² + μ)`. The literal
+    /// eq. 8 is κ = 2/T, which cannot act against μ ≥ 1 (2p²/T ≤ 1.25e-3 on the support).
     Elementwise,
     /// Plain BACF: `h = T/(μT + λ) · IFFT2(μĝ + l̂)`.
     None,
@@ -71,6 +73,8 @@ pub struct AdmmParams {
     pub lambda: f32,
     /// Penalty form.
     pub penalty: PenaltyKind,
+    /// Magnitude κ of the `elementwise` penalty (unitless; see [`PenaltyKind::Elementwise`]).
+    pub spatial_weight: f32,
 }
 
 impl AdmmParams {
@@ -154,20 +158,29 @@ impl AdmmSolver {
                         .collect(),
                 )
             }
-            PenaltyKind::Matrix | PenaltyKind::Elementwise => PenaltyData::Elementwise(
-                mus.iter()
-                    .map(|&mu| {
-                        let mut v = Vec::with_capacity((crop.r1 - crop.r0) * (crop.c1 - crop.c0));
-                        for r in crop.r0..crop.r1 {
-                            for c in crop.c0..crop.c1 {
-                                let p = reg[r * grid.w + c] as f64;
-                                v.push((1.0 / (2.0 * p * p / t + mu as f64)) as f32);
+            PenaltyKind::Matrix | PenaltyKind::Elementwise => {
+                // The matrix form on a non-square grid falls back to the literal eq. 8.
+                let kappa = if params.penalty == PenaltyKind::Elementwise {
+                    params.spatial_weight as f64
+                } else {
+                    2.0 / t
+                };
+                PenaltyData::Elementwise(
+                    mus.iter()
+                        .map(|&mu| {
+                            let mut v =
+                                Vec::with_capacity((crop.r1 - crop.r0) * (crop.c1 - crop.c0));
+                            for r in crop.r0..crop.r1 {
+                                for c in crop.c0..crop.c1 {
+                                    let p = reg[r * grid.w + c] as f64;
+                                    v.push((1.0 / (kappa * p * p + mu as f64)) as f32);
+                                }
                             }
-                        }
-                        v
-                    })
-                    .collect(),
-            ),
+                            v
+                        })
+                        .collect(),
+                )
+            }
             PenaltyKind::None => PenaltyData::Scalar(
                 mus.iter()
                     .map(|&mu| (t / (mu as f64 * t + params.lambda as f64)) as f32)
@@ -435,6 +448,7 @@ mod tests {
             mu_max: 1e4,
             lambda: 0.01,
             penalty: PenaltyKind::None,
+            spatial_weight: 0.0,
         };
         let reg = vec![1.0; 36];
         let mut solver =
@@ -547,6 +561,7 @@ mod tests {
             mu_max: 1e4,
             lambda: 0.01,
             penalty: PenaltyKind::Elementwise,
+            spatial_weight: 2.0 / 576.0,
         };
         let crop = CropBox::centred(grid, GridSize { h: 8, w: 8 });
         let mut solver = AdmmSolver::new(grid, bins, d, &params, &reg, crop);
@@ -575,6 +590,72 @@ mod tests {
         }
     }
 
+    /// Fraction of the learned filter's spatial energy where the penalty window exceeds its
+    /// target-edge value (outside the target's inscribed ellipse).
+    fn energy_outside_target(penalty: PenaltyKind, kappa: f32) -> f64 {
+        let grid = GridSize { h: 32, w: 32 };
+        let d = 4;
+        let mut fft = Fft2::new(grid);
+        let bins = fft.spectrum_len();
+        let mut s = 5u64;
+        let mut xs = vec![0.0f32; grid.len()];
+        let mut xf = vec![Complex32::default(); d * bins];
+        for j in 0..d {
+            for v in xs.iter_mut() {
+                *v = lcg(&mut s);
+            }
+            fft.forward(&xs, &mut xf[j * bins..(j + 1) * bins]);
+        }
+        let mut y = vec![0.0; grid.len()];
+        gaussian_label(grid, 1.5, &mut y);
+        let mut yf = vec![Complex32::default(); bins];
+        fft.forward(&y, &mut yf);
+        let (min, edge) = (0.1, 0.8);
+        let reg = reg_window(grid, Size2 { w: 48.0, h: 48.0 }, 4, min, edge);
+        let params = AdmmParams {
+            iterations: 3,
+            mu_init: 1.0,
+            beta: 20.0,
+            mu_max: 1e4,
+            lambda: 0.01,
+            penalty,
+            spatial_weight: kappa,
+        };
+        let crop = CropBox::centred(grid, GridSize { h: 12, w: 12 });
+        let mut solver = AdmmSolver::new(grid, bins, d, &params, &reg, crop);
+        let mut g = vec![Complex32::default(); d * bins];
+        solver.train(&mut fft, &xf, &yf, &mut g);
+        let (mut outside, mut total) = (0.0f64, 0.0f64);
+        let mut hs = vec![0.0f32; grid.len()];
+        for j in 0..d {
+            fft.inverse(&g[j * bins..(j + 1) * bins], &mut hs);
+            for (h, p) in hs.iter().zip(&reg) {
+                let e = (*h as f64).powi(2);
+                total += e;
+                if *p > edge {
+                    outside += e;
+                }
+            }
+        }
+        outside / total
+    }
+
+    #[test]
+    fn elementwise_penalty_moves_filter_energy_into_the_target() {
+        let t = 32.0 * 32.0;
+        let none = energy_outside_target(PenaltyKind::None, 0.0);
+        // The literal eq. 8 (κ = 2/T) is numerically the unpenalised filter.
+        let literal = energy_outside_target(PenaltyKind::Elementwise, 2.0 / t);
+        assert!((literal - none).abs() < 1e-2 * none, "{literal} vs {none}");
+        eprintln!("energy outside the target: none {none:.4}, eq. 8 literal {literal:.4}");
+        // At a magnitude that matters the energy outside the target falls, more with κ.
+        let k10 = energy_outside_target(PenaltyKind::Elementwise, 10.0);
+        let k100 = energy_outside_target(PenaltyKind::Elementwise, 100.0);
+        assert!(k10 < 0.9 * none, "κ=10: {k10} vs none {none}");
+        eprintln!("κ=10 {k10:.4}, κ=100 {k100:.4}");
+        assert!(k100 < k10, "κ=100: {k100} vs κ=10 {k10}");
+    }
+
     #[test]
     fn crop_box_is_centred_like_the_reference() {
         let c = CropBox::centred(GridSize { h: 60, w: 60 }, GridSize { h: 10, w: 7 });
@@ -590,6 +671,7 @@ mod tests {
             mu_max: 10000.0,
             lambda: 0.01,
             penalty: PenaltyKind::Matrix,
+            spatial_weight: 0.0,
         };
         assert_eq!(p.mu_schedule(), vec![1.0, 20.0, 400.0, 8000.0, 10000.0]);
     }

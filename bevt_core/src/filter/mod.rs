@@ -5,3 +5,4 @@ pub mod admm;
 pub mod label;
 pub mod peak;
 pub mod response;
+pub mod shift;
