@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Module evaluation on the dev set: the authors' reference (config/bevt_reference.yaml), each
-# fast-mode addition alone on top of it, all of them together (the default, config/bevt.yaml),
-# then the default with one module changed back at a time; plus the reference's own modules
+# fast-mode addition alone on top of it, all of them together (config/bevt_fast.yaml, rows
+# "default*"), then the fast mode with one module changed back at a time; plus the reference's own modules
 # (verification, enhanced background learning, beta, grayscale). Accuracy is deterministic;
 # fps is indicative (run on a quiet machine). Prints a Markdown table with the mean over the
 # 7 sequences and over the 6 without the bimodal wakeboard4.
@@ -14,6 +14,7 @@ out=${2:-results/ablation}
 cargo build --release -p bevt_node --bin bevt >/dev/null
 bevt=target/release/bevt
 ref=(--config config/bevt_reference.yaml)
+fast=(--config config/bevt_fast.yaml)
 run() {
   local name=$1; shift
   "$bevt" eval --dataset "$dataset" --out "$out/$name" --threads 1 "$@" >/dev/null || true
@@ -24,14 +25,14 @@ run ref+scale_filter "${ref[@]}" --set detection.scale_estimator=filter
 run ref+shifted_sample "${ref[@]}" --set learning.training_sample=shifted
 run ref+elementwise "${ref[@]}" --set admm.penalty=elementwise
 run ref+penalty_none "${ref[@]}" --set admm.penalty=none
-run default
-run default-colornames --set features.colornames=false
-run default-scale_filter --set detection.scale_estimator=search
-run default-shifted_sample --set learning.training_sample=fresh
-run default_penalty_matrix --set admm.penalty=matrix
-run default_penalty_none --set admm.penalty=none
-run default_elementwise_kappa3 --set admm.spatial_weight=3
-run default_elementwise_kappa30 --set admm.spatial_weight=30
+run default "${fast[@]}"
+run default-colornames "${fast[@]}" --set features.colornames=false
+run default-scale_filter "${fast[@]}" --set detection.scale_estimator=search
+run default-shifted_sample "${fast[@]}" --set learning.training_sample=fresh
+run default_penalty_matrix "${fast[@]}" --set admm.penalty=matrix
+run default_penalty_none "${fast[@]}" --set admm.penalty=none
+run default_elementwise_kappa3 "${fast[@]}" --set admm.spatial_weight=3
+run default_elementwise_kappa30 "${fast[@]}" --set admm.spatial_weight=30
 run ref_no_verification "${ref[@]}" --set verification.enabled=false
 run ref_no_ebl_small_window_no_penalty "${ref[@]}" --set admm.penalty=none --set window.search_area_scale=2.0
 run ref_beta_10 "${ref[@]}" --set admm.beta=10

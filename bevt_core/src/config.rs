@@ -52,7 +52,7 @@ impl Default for FeatureConfig {
             kind: FeatureKind::Hog,
             hog_cell_size: 4,
             grayscale: true,
-            colornames: true,
+            colornames: false,
             gain: 1.0,
             cnn: None,
         }
@@ -124,7 +124,7 @@ impl Default for AdmmConfig {
             beta: 20.0,
             mu_max: 10000.0,
             lambda: 0.01,
-            penalty: PenaltyKind::Elementwise,
+            penalty: PenaltyKind::Matrix,
             spatial_weight: 10.0,
             reg_window_min: 0.1,
             reg_window_edge: 0.8,
@@ -202,7 +202,7 @@ pub struct DetectionConfig {
 impl Default for DetectionConfig {
     fn default() -> Self {
         Self {
-            scale_estimator: ScaleEstimator::Filter,
+            scale_estimator: ScaleEstimator::Search,
             number_of_scales: 5,
             scale_step: 1.01,
             newton_iterations: 50,
@@ -240,7 +240,7 @@ impl Default for LearningConfig {
         Self {
             rate: 0.013,
             reinforced_rate: 0.019,
-            training_sample: TrainingSample::Shifted,
+            training_sample: TrainingSample::Fresh,
         }
     }
 }
@@ -1090,6 +1090,19 @@ mod tests {
     }
 
     #[test]
+    fn fast_yaml_is_the_default_plus_the_fast_mode_additions() {
+        let text = include_str!("../../config/bevt_fast.yaml");
+        let c: TrackerConfig = serde_norway::from_str(text).unwrap();
+        c.validate().unwrap();
+        let mut want = TrackerConfig::default();
+        want.features.colornames = true;
+        want.detection.scale_estimator = ScaleEstimator::Filter;
+        want.learning.training_sample = TrainingSample::Shifted;
+        want.admm.penalty = PenaltyKind::Elementwise;
+        assert_eq!(c, want);
+    }
+
+    #[test]
     fn reference_yaml_keeps_the_reference() {
         let text = include_str!("../../config/bevt_reference.yaml");
         let c: TrackerConfig = serde_norway::from_str(text).unwrap();
@@ -1134,11 +1147,11 @@ mod tests {
     #[test]
     fn yaml_round_trips() {
         let mut c = TrackerConfig::default();
-        c.admm.penalty = PenaltyKind::Matrix;
+        c.admm.penalty = PenaltyKind::Elementwise;
         c.verification.norm = ConsensusNorm::FrobeniusSq;
-        c.detection.scale_estimator = ScaleEstimator::Search;
+        c.detection.scale_estimator = ScaleEstimator::Filter;
         c.features.colornames = !c.features.colornames;
-        c.learning.training_sample = TrainingSample::Fresh;
+        c.learning.training_sample = TrainingSample::Shifted;
         let s = serde_norway::to_string(&c).unwrap();
         let d: TrackerConfig = serde_norway::from_str(&s).unwrap();
         assert_eq!(c, d);
