@@ -268,45 +268,10 @@ fn lost_target_is_published_with_empty_detections_and_reinit_clears_it_over_dds(
 mod topics_and_bad_input {
     use super::*;
     use bevt_msgs::bevt::TrackStatus;
-    use bevt_msgs::sensor_msgs::{CompressedImage, Image};
-    use bevt_msgs::std_msgs::Header;
+    use bevt_msgs::sensor_msgs::CompressedImage;
     use bevt_msgs::vision_msgs::{BoundingBox2D, Detection2D, Point2D, Pose2D};
     use bevt_node::sim::{wall_stamp, RawPeer};
-
-    fn image(seq: &SynthParams, t: usize) -> (Image, BBox) {
-        let f = seq.frame(t);
-        (
-            Image {
-                header: Header {
-                    stamp: wall_stamp(),
-                    frame_id: "cam".into(),
-                },
-                height: seq.height as u32,
-                width: seq.width as u32,
-                encoding: "rgb8".into(),
-                is_bigendian: 0,
-                step: (seq.width * 3) as u32,
-                data: f.rgb,
-            },
-            f.truth,
-        )
-    }
-
-    /// Statuses received within `timeout` until one satisfies `want`.
-    fn wait_status(
-        gs: &GroundStation,
-        timeout: Duration,
-        want: impl Fn(&TrackStatus) -> bool,
-    ) -> Option<TrackStatus> {
-        let end = Instant::now() + timeout;
-        while Instant::now() < end {
-            if let Some(s) = gs.take_status().into_iter().find(|s| want(s)) {
-                return Some(s);
-            }
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        None
-    }
+    use bevt_tests::{synth_image as image, wait_status};
 
     #[test]
     fn init_topic_compressed_input_and_bad_images_over_dds() {

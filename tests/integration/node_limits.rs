@@ -14,6 +14,7 @@ use bevt_node::app::{NodeCore, NodeSettings};
 use bevt_node::convert::reinit_request;
 use bevt_node::ros::{camera_qos, context, ros_name, run, RosSettings};
 use bevt_node::sim::{spawn_camera, wall_stamp, GroundStation, RawPeer};
+use bevt_tests::{synth_image as image, wait_status};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -60,41 +61,6 @@ fn settings(k: u16) -> RosSettings {
         domain_id: domain(k),
         ..RosSettings::default()
     }
-}
-
-fn image(seq: &SynthParams, t: usize) -> (Image, BBox) {
-    let f = seq.frame(t);
-    (
-        Image {
-            header: Header {
-                stamp: wall_stamp(),
-                frame_id: "cam".into(),
-            },
-            height: seq.height as u32,
-            width: seq.width as u32,
-            encoding: "rgb8".into(),
-            is_bigendian: 0,
-            step: (seq.width * 3) as u32,
-            data: f.rgb,
-        },
-        f.truth,
-    )
-}
-
-/// Statuses received within `timeout` until one satisfies `want`.
-fn wait_status(
-    gs: &GroundStation,
-    timeout: Duration,
-    want: impl Fn(&TrackStatus) -> bool,
-) -> Option<TrackStatus> {
-    let end = Instant::now() + timeout;
-    while Instant::now() < end {
-        if let Some(s) = gs.take_status().into_iter().find(|s| want(s)) {
-            return Some(s);
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    None
 }
 
 /// Publishes `send()` again until the node reports a status with its stamp.

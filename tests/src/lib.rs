@@ -50,3 +50,40 @@ pub fn track_synthetic(
         })
         .collect()
 }
+
+/// Frame `t` of a synthetic sequence as a `sensor_msgs/Image` (rgb8, stamped now), with its
+/// true box.
+pub fn synth_image(seq: &SynthParams, t: usize) -> (bevt_msgs::sensor_msgs::Image, BBox) {
+    let f = seq.frame(t);
+    (
+        bevt_msgs::sensor_msgs::Image {
+            header: bevt_msgs::std_msgs::Header {
+                stamp: bevt_node::sim::wall_stamp(),
+                frame_id: "cam".into(),
+            },
+            height: seq.height as u32,
+            width: seq.width as u32,
+            encoding: "rgb8".into(),
+            is_bigendian: 0,
+            step: (seq.width * 3) as u32,
+            data: f.rgb,
+        },
+        f.truth,
+    )
+}
+
+/// Statuses the ground station receives within `timeout`, until one satisfies `want`.
+pub fn wait_status(
+    gs: &bevt_node::sim::GroundStation,
+    timeout: std::time::Duration,
+    want: impl Fn(&bevt_msgs::bevt::TrackStatus) -> bool,
+) -> Option<bevt_msgs::bevt::TrackStatus> {
+    let end = std::time::Instant::now() + timeout;
+    while std::time::Instant::now() < end {
+        if let Some(s) = gs.take_status().into_iter().find(|s| want(s)) {
+            return Some(s);
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    None
+}
