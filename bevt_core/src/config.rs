@@ -354,6 +354,11 @@ pub struct RedetectionConfig {
     pub tile_stride: f32,
     /// Confidence at or above which a window is a candidate (0–1).
     pub reacquire_threshold: f32,
+    /// A candidate's score must also reach this fraction of the learning gate's reference
+    /// level frozen on the last confident frame (0–1; 0 = off): a look-alike that the frozen
+    /// filter scores far below the target it was tracking is not taken, whatever its
+    /// absolute confidence.
+    pub reacquire_relative: f32,
     /// Frames in a row a candidate must stay confident before the track is taken back.
     pub reacquire_frames: usize,
 }
@@ -366,6 +371,7 @@ impl Default for RedetectionConfig {
             scales: vec![1.0, 0.8, 1.25],
             tile_stride: 0.5,
             reacquire_threshold: 0.5,
+            reacquire_relative: 0.5,
             reacquire_frames: 3,
         }
     }
@@ -840,6 +846,12 @@ impl TrackerConfig {
             "[0, 1]",
         )?;
         check(
+            unit(r.reacquire_relative),
+            "redetection.reacquire_relative",
+            r.reacquire_relative,
+            "[0, 1]",
+        )?;
+        check(
             (1..=MAX_FRAMES_KEY).contains(&r.reacquire_frames),
             "redetection.reacquire_frames",
             r.reacquire_frames,
@@ -903,6 +915,7 @@ impl TrackerConfig {
                 scales: r.scales.clone(),
                 tile_stride: r.tile_stride,
                 reacquire_threshold: r.reacquire_threshold,
+                reacquire_relative: r.reacquire_relative,
                 reacquire_frames: r.reacquire_frames,
             },
         })
@@ -992,6 +1005,12 @@ mod tests {
             }),
             ("redetection.reacquire_frames", |c| {
                 c.redetection.reacquire_frames = 0
+            }),
+            ("redetection.reacquire_relative", |c| {
+                c.redetection.reacquire_relative = -0.1
+            }),
+            ("redetection.reacquire_relative", |c| {
+                c.redetection.reacquire_relative = f32::NAN
             }),
         ] {
             let mut c = TrackerConfig::default();

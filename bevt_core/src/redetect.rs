@@ -12,8 +12,12 @@
 //!    every configured scale, **ordered by distance from the last known position** (so the
 //!    search radius grows frame by frame from where the target was), cycling once done.
 //!
-//! A window is *confident* when its confidence (against the reference level frozen at the
-//! loss) is at least `reacquire_threshold`. The most confident window becomes the
+//! A window is *confident* when its confidence is at least the [`candidate_threshold`]:
+//! `reacquire_threshold`, raised to what a score of `reacquire_relative` × the learning
+//! gate's reference level on the last confident frame would give. The absolute part keeps
+//! background out; the relative part keeps out a look-alike that the frozen filter scores
+//! far below the target it was tracking (with colour names a same-coloured object of the
+//! target's size reaches an absolute confidence of ~0.6 where the target scored ~0.9). The most confident window becomes the
 //! [`Candidate`] (replacing a less confident one); a candidate that stops being confident is
 //! dropped. The track is taken back only when one candidate has been confident for
 //! `reacquire_frames` frames in a row, so a brief look-alike does not steal the track.
@@ -37,6 +41,9 @@ pub struct RedetectParams {
     pub tile_stride: f32,
     /// Confidence at or above which a window is a candidate.
     pub reacquire_threshold: f32,
+    /// Fraction of the reference level at the loss a candidate's score must also reach
+    /// (see [`candidate_threshold`]).
+    pub reacquire_relative: f32,
     /// Frames in a row a candidate must be confident to be accepted.
     pub reacquire_frames: usize,
 }
@@ -124,6 +131,22 @@ impl SearchPlan {
         let w = *self.windows.get(self.next)?;
         self.next = (self.next + 1) % self.windows.len();
         Some(w)
+    }
+}
+
+/// The confidence a window needs to be a candidate: `reacquire_threshold`, or the
+/// confidence `to_confidence` gives a score of `reacquire_relative × reference` (the
+/// learning gate's reference level frozen on the last confident frame) if that is higher.
+pub fn candidate_threshold(
+    p: &RedetectParams,
+    reference: f32,
+    to_confidence: impl Fn(f32) -> f32,
+) -> f32 {
+    let relative = to_confidence(p.reacquire_relative * reference);
+    if relative.is_finite() {
+        p.reacquire_threshold.max(relative)
+    } else {
+        p.reacquire_threshold
     }
 }
 
@@ -228,8 +251,26 @@ mod tests {
             scales: vec![1.0, 0.8],
             tile_stride: 0.5,
             reacquire_threshold: 0.5,
+            reacquire_relative: 0.5,
             reacquire_frames: 3,
         }
+    }
+
+    #[test]
+    fn candidate_threshold_is_the_higher_of_absolute_and_relative() {
+        let conf = |s: f32| s / (s + 5.0);
+        let p = params();
+        // Target scored s = 40 (confidence 0.89) before the loss: half of it is 20, 0.8.
+        assert!((candidate_threshold(&p, 40.0, conf) - 0.8).abs() < 1e-6);
+        // A weak reference (or none yet): the absolute threshold.
+        assert_eq!(candidate_threshold(&p, 4.0, conf), 0.5);
+        assert_eq!(candidate_threshold(&p, 0.0, conf), 0.5);
+        let off = RedetectParams {
+            reacquire_relative: 0.0,
+            ..params()
+        };
+        assert_eq!(candidate_threshold(&off, 40.0, conf), 0.5);
+        assert_eq!(candidate_threshold(&p, 40.0, |_| f32::NAN), 0.5);
     }
 
     #[test]

@@ -7,7 +7,7 @@ use crate::config::TrackerSpec;
 use crate::error::TrackError;
 use crate::geometry::Point2;
 use crate::image::Frame;
-use crate::redetect::{CandidateTracker, SearchPlan};
+use crate::redetect::{candidate_threshold, CandidateTracker, SearchPlan};
 use crate::tracker::TrackOutput;
 use rustfft::num_complex::Complex32;
 
@@ -25,11 +25,15 @@ pub(super) struct LostState {
     m_ideal: Vec<f32>,
     pos: Point2,
     scale: f32,
+    /// The learning gate's reference level of the score on the last confident frame.
+    reference: f32,
     saved: bool,
     /// The search.
     plan: SearchPlan,
     candidates: CandidateTracker,
     scale_at_loss: f32,
+    /// Confidence a window needs to be a candidate ([`candidate_threshold`]).
+    threshold: f32,
 }
 
 /// Saves the model before the first unconfident frame can be learned.
@@ -40,6 +44,7 @@ pub(super) fn snapshot(st: &mut State) {
     l.m_ideal.clone_from(&st.m_ideal);
     l.pos = st.pos;
     l.scale = st.scale;
+    l.reference = st.confidence.reference();
     l.saved = true;
 }
 
@@ -55,6 +60,8 @@ pub(super) fn enter(st: &mut State, spec: &TrackerSpec) {
         l.saved = false;
     }
     l.scale_at_loss = st.scale;
+    let confidence = &st.confidence;
+    l.threshold = candidate_threshold(&spec.redetect, l.reference, |s| confidence.confidence(s));
     l.candidates.clear();
     l.plan = SearchPlan::new(
         st.pos,
@@ -123,7 +130,7 @@ pub(super) fn search(
     spec: &TrackerSpec,
 ) -> Result<TrackOutput, TrackError> {
     let p = &spec.redetect;
-    let threshold = p.reacquire_threshold;
+    let threshold = st.lost.threshold;
     let near = st.geo.cell as f32 * st.scale * CANDIDATE_NEAR_CELLS;
     st.lost.candidates.begin_frame(near);
     let mut budget = p.windows_per_frame;
