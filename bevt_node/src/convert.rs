@@ -1,6 +1,6 @@
-//! Conversions between ROS messages and core types: camera images to [`Frame`]s (zero-copy
-//! for rgb8/bgr8/rgba8/bgra8/mono8; YUV 4:2:2 and JPEG/PNG decoded into a reusable
-//! buffer), tracker outputs to `vision_msgs/Detection2DArray`.
+//! Conversions between ROS messages and core types, shared by the node and the tool: camera
+//! images to [`Frame`]s (zero-copy for rgb8/bgr8/rgba8/bgra8/mono8; YUV 4:2:2 and JPEG/PNG
+//! decoded into a reusable buffer), tracker outputs to `vision_msgs/Detection2DArray`.
 //!
 //! Untrusted sizes are checked before anything is allocated from them: a frame's width,
 //! height and pixel count are checked against [`ImageLimits`] from the message fields (raw

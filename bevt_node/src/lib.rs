@@ -1,25 +1,22 @@
-//! # bevt_node: drivers of the BEVT tracker
+//! # bevt_node: the two programs around the BEVT tracker
 //!
-//! Everything that touches files and the outside world, over the pure [`bevt_core`]:
-//! - [`params`]: YAML configuration files and `key=value` overrides.
-//! - [`dataset`]: UAV123-style datasets (the `sequences.json` manifest, the official
-//!   UAV123 / UAV123_10fps download layout, plain OTB-style folders) and annotation files.
-//! - [`runner`]: one-pass evaluation of a sequence (frames decoded on a prefetch thread,
-//!   tracking timed alone), partial results kept on failure.
-//! - [`report`]: result files, `summary.json`, console tables, comparisons with other
-//!   trackers' result folders and per-attribute scores.
-//! - [`plots`]: precision and success plots (PNG).
+//! Everything that touches files and the outside world, over the pure [`bevt_core`], grouped
+//! by the program it serves:
+//! - [`node`]: the live ROS 2 node (`bevt_node`): its logic without DDS ([`node::app`]), the
+//!   ros2-client layer ([`node::ros`]), start-up parameters ([`node::node_params`]) and the
+//!   DDS synthetic camera / ground station used by the demo, tests and benchmark
+//!   ([`node::sim`]).
+//! - [`tool`]: the offline `bevt` tool: datasets and annotation files ([`tool::dataset`]),
+//!   one-pass evaluation ([`tool::runner`]), result files and tables ([`tool::report`]),
+//!   precision/success plots ([`tool::plots`]).
+//! - Shared by both: [`convert`] (ROS messages ↔ frames, boxes and detections) and
+//!   [`params`] (the tracker's YAML configuration and `key=value` overrides).
 //!
-//! The `bevt` binary (`src/bin/bevt.rs`) is a thin command-line layer over these.
+//! The binaries (`src/bin/`) are thin command-line layers: `bevt_node.rs` (the node),
+//! `bevt.rs` (the tool), `bevt_latency.rs` (the node's latency benchmark).
 #![deny(missing_docs)]
 
-pub mod app;
 pub mod convert;
-pub mod dataset;
-pub mod node_params;
+pub mod node;
 pub mod params;
-pub mod plots;
-pub mod report;
-pub mod ros;
-pub mod runner;
-pub mod sim;
+pub mod tool;

@@ -5,9 +5,9 @@
 //! launch path (`launch_from_args`, `NodeCore`, `ros::run`) until its standard input
 //! closes, so it never outlives the test that started it.
 
-use bevt_node::app::NodeCore;
-use bevt_node::node_params::launch_from_args;
-use bevt_node::ros;
+use bevt_node::node::app::NodeCore;
+use bevt_node::node::node_params::launch_from_args;
+use bevt_node::node::ros;
 use std::io::Read;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -6,8 +6,8 @@
 
 use bevt_core::eval::synth::SynthParams;
 use bevt_core::{BBox, TrackerConfig};
-use bevt_node::app::{NodeCore, NodeSettings};
-use bevt_node::ros::{run, RosSettings};
+use bevt_node::node::app::{NodeCore, NodeSettings};
+use bevt_node::node::ros::{run, RosSettings};
 use bevt_tests::{dev_dataset, temp_dir};
 use ros2_client::ServiceMapping;
 use std::path::{Path, PathBuf};
@@ -43,7 +43,7 @@ fn write_frames(dir: &Path) -> Vec<Option<BBox>> {
     let mut truth = Vec::new();
     let (w, h);
     if let Some(root) = dev_dataset() {
-        let mut ds = bevt_node::dataset::open_dataset(&root).unwrap();
+        let mut ds = bevt_node::tool::dataset::open_dataset(&root).unwrap();
         ds.select(&["building4".to_string()]).unwrap();
         let seq = ds.sequences[0].load().unwrap();
         let mut size = (0, 0);

@@ -6,10 +6,10 @@ use bevt_core::eval::synth::SynthParams;
 use bevt_core::{BBox, TrackerConfig};
 use bevt_msgs::bevt::ReinitRequest;
 use bevt_msgs::builtin_interfaces::Time;
-use bevt_node::app::{NodeCore, NodeSettings};
 use bevt_node::convert::bbox_from_detection;
-use bevt_node::ros::{run, RosSettings};
-use bevt_node::sim::{spawn_camera, GroundStation, TruthLog};
+use bevt_node::node::app::{NodeCore, NodeSettings};
+use bevt_node::node::ros::{run, RosSettings};
+use bevt_node::node::sim::{spawn_camera, GroundStation, TruthLog};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -270,7 +270,7 @@ mod topics_and_bad_input {
     use bevt_msgs::bevt::TrackStatus;
     use bevt_msgs::sensor_msgs::CompressedImage;
     use bevt_msgs::vision_msgs::{BoundingBox2D, Detection2D, Point2D, Pose2D};
-    use bevt_node::sim::{wall_stamp, RawPeer};
+    use bevt_node::node::sim::{wall_stamp, RawPeer};
     use bevt_tests::{synth_image as image, wait_status};
 
     #[test]

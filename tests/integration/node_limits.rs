@@ -10,10 +10,10 @@ use bevt_msgs::builtin_interfaces::Time;
 use bevt_msgs::sensor_msgs::{CompressedImage, Image};
 use bevt_msgs::std_msgs::Header;
 use bevt_msgs::RosType;
-use bevt_node::app::{NodeCore, NodeSettings};
 use bevt_node::convert::reinit_request;
-use bevt_node::ros::{camera_qos, context, ros_name, run, RosSettings};
-use bevt_node::sim::{spawn_camera, wall_stamp, GroundStation, RawPeer};
+use bevt_node::node::app::{NodeCore, NodeSettings};
+use bevt_node::node::ros::{camera_qos, context, ros_name, run, RosSettings};
+use bevt_node::node::sim::{spawn_camera, wall_stamp, GroundStation, RawPeer};
 use bevt_tests::{synth_image as image, wait_status};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -362,7 +362,7 @@ fn a_reinit_burst_is_answered_in_full_while_the_camera_keeps_being_tracked() {
 
 #[test]
 fn big_endian_cdr_images_are_accepted() {
-    use bevt_node::ros::names;
+    use bevt_node::node::ros::names;
     use ros2_client::dds::rustdds;
     let s = settings(2);
     let _node = Node::start(&s, NodeSettings::default());

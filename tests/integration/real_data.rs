@@ -2,9 +2,9 @@
 //! a printed reason otherwise).
 
 use bevt_core::{BevtTracker, TrackerConfig};
-use bevt_node::dataset::open_dataset;
-use bevt_node::report::summarize_run;
-use bevt_node::runner::run_sequence;
+use bevt_node::tool::dataset::open_dataset;
+use bevt_node::tool::report::summarize_run;
+use bevt_node::tool::runner::run_sequence;
 use bevt_tests::dev_dataset;
 
 /// Measured with the default configuration (README): building4 P@20 1.000, AUC 0.72.

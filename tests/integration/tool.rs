@@ -3,9 +3,9 @@
 
 use bevt_core::eval::synth::SynthParams;
 use bevt_core::{BevtTracker, TrackerConfig};
-use bevt_node::dataset::{open_dataset, parse_annotation};
-use bevt_node::report::{build_summary, summarize_run, write_result_file, write_summary};
-use bevt_node::runner::run_sequence;
+use bevt_node::tool::dataset::{open_dataset, parse_annotation};
+use bevt_node::tool::report::{build_summary, summarize_run, write_result_file, write_summary};
+use bevt_node::tool::runner::run_sequence;
 use bevt_tests::temp_dir;
 use std::collections::BTreeMap;
 use std::path::Path;

@@ -58,7 +58,7 @@ pub fn synth_image(seq: &SynthParams, t: usize) -> (bevt_msgs::sensor_msgs::Imag
     (
         bevt_msgs::sensor_msgs::Image {
             header: bevt_msgs::std_msgs::Header {
-                stamp: bevt_node::sim::wall_stamp(),
+                stamp: bevt_node::node::sim::wall_stamp(),
                 frame_id: "cam".into(),
             },
             height: seq.height as u32,
@@ -74,7 +74,7 @@ pub fn synth_image(seq: &SynthParams, t: usize) -> (bevt_msgs::sensor_msgs::Imag
 
 /// Statuses the ground station receives within `timeout`, until one satisfies `want`.
 pub fn wait_status(
-    gs: &bevt_node::sim::GroundStation,
+    gs: &bevt_node::node::sim::GroundStation,
     timeout: std::time::Duration,
     want: impl Fn(&bevt_msgs::bevt::TrackStatus) -> bool,
 ) -> Option<bevt_msgs::bevt::TrackStatus> {

@@ -8,13 +8,15 @@ use anyhow::{bail, Context, Result};
 use bevt_core::eval::metrics::score_sequence;
 use bevt_core::eval::synth::SynthParams;
 use bevt_core::{BBox, BevtTracker, Frame, PixelFormat, Tracker};
-use bevt_node::dataset::{format_annotation_row, image_files, open_dataset, parse_annotation};
 use bevt_node::params::load_config;
-use bevt_node::plots::{plot_curves, Curve};
-use bevt_node::report::{
+use bevt_node::tool::dataset::{
+    format_annotation_row, image_files, open_dataset, parse_annotation,
+};
+use bevt_node::tool::plots::{plot_curves, Curve};
+use bevt_node::tool::report::{
     build_summary, console_table, summarize_run, write_result_file, write_summary,
 };
-use bevt_node::runner::{decode_ahead, run_sequence, track_feed};
+use bevt_node::tool::runner::{decode_ahead, run_sequence, track_feed};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeMap;

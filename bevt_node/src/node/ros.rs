@@ -1,5 +1,5 @@
 //! The ROS 2 layer over `ros2-client` (pure Rust, RustDDS): names, QoS and threads in one
-//! place; all decisions are in [`crate::app::NodeCore`].
+//! place; all decisions are in [`crate::node::app::NodeCore`].
 //!
 //! Threads: `bevt-dds-rx` receives camera messages and keeps only the newest one in a
 //! slot (counting the ones it replaces as dropped); the calling thread runs the tracker
@@ -11,7 +11,7 @@
 //! once with the reason. Each turn then processes the newest camera frame, if any, and
 //! serves at most one admitted request, so requests never starve the camera.
 
-use crate::app::{CameraMsg, FrameOutputs, NodeCore};
+use crate::node::app::{CameraMsg, FrameOutputs, NodeCore};
 use bevt_msgs::bevt::{ReinitRequest, ReinitResponse, TrackStatus};
 use bevt_msgs::diagnostic_msgs::DiagnosticArray;
 use bevt_msgs::sensor_msgs::{CompressedImage, Image};
@@ -21,8 +21,8 @@ use bevt_msgs::RosType;
 use futures::StreamExt;
 use ros2_client::dds::rustdds::{DomainParticipantBuilder, FragmentLimits};
 use ros2_client::{
-    Context, MessageTypeName, Name, Node, NodeName, NodeOptions, QosProfile, ServiceMapping,
-    ServiceTypeName,
+    Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile, Server,
+    ServiceMapping, ServiceTypeName, Subscription,
 };
 use std::net::IpAddr;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
@@ -253,16 +253,28 @@ impl Slot {
     }
 }
 
-/// Runs the node until `shutdown` is set. `observe` sees every output set (for logs/tests).
-///
-/// # Errors
-/// [`RosError`] when DDS entities cannot be created.
-pub fn run(
-    mut core: NodeCore,
-    settings: &RosSettings,
-    shutdown: Arc<AtomicBool>,
-    mut observe: impl FnMut(&FrameOutputs),
-) -> Result<(), RosError> {
+/// The node's DDS entities except the camera subscriptions (those belong to the
+/// reception thread: [`CameraSubscriptions`]).
+struct Endpoints {
+    node: Node,
+    sub_init: Subscription<Detection2D>,
+    pub_det: Publisher<Detection2DArray>,
+    pub_status: Publisher<TrackStatus>,
+    pub_diag: Publisher<DiagnosticArray>,
+    /// Present when `debug_image_rate_hz > 0`.
+    pub_debug: Option<Publisher<Image>>,
+    srv_reinit: Server<ReinitRequest, ReinitResponse>,
+    srv_stop: Server<TriggerRequest, TriggerResponse>,
+}
+
+/// The raw and compressed camera subscriptions, handed to the reception thread.
+struct CameraSubscriptions {
+    raw: Subscription<Image>,
+    compressed: Subscription<CompressedImage>,
+}
+
+/// Creates the node and all its topics, subscriptions, publishers and services.
+fn create_endpoints(settings: &RosSettings) -> Result<(Endpoints, CameraSubscriptions), RosError> {
     let ctx = context(settings)?;
     let node_name = NodeName::new(&settings.namespace, &settings.node_name)
         .map_err(|e| RosError::Name(settings.node_name.clone(), format!("{e:?}")))?;
@@ -306,9 +318,6 @@ pub fn run(
     } else {
         None
     };
-    let debug_period =
-        Duration::try_from_secs_f64(1.0 / settings.debug_image_rate_hz).unwrap_or(MAX_PERIOD);
-    let mut next_debug = Instant::now();
     let sub_img = node
         .create_subscription::<Image>(&t_img, Some(cq.clone()))
         .map_err(create_err("image subscription"))?;
@@ -346,20 +355,40 @@ pub fn run(
             sq.clone(),
         )
         .map_err(create_err("stop service"))?;
+    let endpoints = Endpoints {
+        node,
+        sub_init,
+        pub_det,
+        pub_status,
+        pub_diag,
+        pub_debug,
+        srv_reinit,
+        srv_stop,
+    };
+    let camera = CameraSubscriptions {
+        raw: sub_img,
+        compressed: sub_cmp,
+    };
+    Ok((endpoints, camera))
+}
 
-    // Reception thread: newest frame wins.
+/// Starts the reception thread `bevt-dds-rx`: it puts every camera message into the
+/// returned slot (newest frame wins) until `shutdown` is set.
+fn spawn_reception(
+    camera: CameraSubscriptions,
+    shutdown: Arc<AtomicBool>,
+) -> Result<Arc<Slot>, RosError> {
     let slot = Arc::new(Slot::default());
     let rx_slot = slot.clone();
-    let rx_stop = shutdown.clone();
     std::thread::Builder::new()
         .name("bevt-dds-rx".into())
         .spawn(move || {
             futures::executor::block_on(async move {
-                let raw = sub_img.async_stream().map(|r| match r {
+                let raw = camera.raw.async_stream().map(|r| match r {
                     Ok((m, _)) => Incoming::Raw(m, Instant::now()),
                     Err(e) => Incoming::Error(format!("cannot read an image message: {e:?}")),
                 });
-                let cmp = sub_cmp.async_stream().map(|r| match r {
+                let cmp = camera.compressed.async_stream().map(|r| match r {
                     Ok((m, _)) => Incoming::Compressed(m, Instant::now()),
                     Err(e) => {
                         Incoming::Error(format!("cannot read a compressed image message: {e:?}"))
@@ -367,7 +396,7 @@ pub fn run(
                 });
                 let mut both = std::pin::pin!(futures::stream::select(raw, cmp));
                 while let Some(item) = both.next().await {
-                    if rx_stop.load(Ordering::Relaxed) {
+                    if shutdown.load(Ordering::Relaxed) {
                         break;
                     }
                     rx_slot.put(item);
@@ -378,146 +407,209 @@ pub fn run(
             what: "reception thread".into(),
             reason: e.to_string(),
         })?;
+    Ok(slot)
+}
 
-    let log = |node: &Node, level: ros2_client::log::LogLevel, text: &str| {
-        ros2_client::rosout!(*node, level, "{}", text);
-        eprintln!("[{:?}] [{}]: {text}", level, settings.node_name);
-    };
-    log(
-        &node,
-        ros2_client::log::LogLevel::Info,
-        "started: waiting for images and an initial box",
-    );
-    let publish = |o: &FrameOutputs| {
+/// The worker loop's state: the node logic, its DDS endpoints, the admitted requests
+/// waiting for their turn and the timers.
+struct Worker<'a> {
+    core: NodeCore,
+    ep: Endpoints,
+    settings: &'a RosSettings,
+    pending: std::collections::VecDeque<PendingReinit>,
+    /// Refusals since the last log line (a flood of requests is not a flood of logs).
+    refused: u32,
+    last_refusal: String,
+    next_diag: Instant,
+    next_debug: Instant,
+    debug_period: Duration,
+}
+
+impl Worker<'_> {
+    fn log(&self, level: ros2_client::log::LogLevel, text: &str) {
+        ros2_client::rosout!(self.ep.node, level, "{}", text);
+        eprintln!("[{:?}] [{}]: {text}", level, self.settings.node_name);
+    }
+
+    fn publish(&self, o: &FrameOutputs) {
         // A failed publish (no memory, shut down) is logged by RustDDS; the node continues.
-        let _ = pub_det.publish(o.detections.clone());
-        let _ = pub_status.publish(o.status.clone());
-    };
-    let mut next_diag = Instant::now();
-    let mut pending: std::collections::VecDeque<PendingReinit> = Default::default();
-    // Refusals since the last log line (a flood of requests is not a flood of logs).
-    let (mut refused, mut last_refusal) = (0u32, String::new());
-    while !shutdown.load(Ordering::Relaxed) {
-        // 1. Read every request that arrived; refuse at once what the rate limit refuses.
-        let admit = |core: &mut NodeCore, len: usize| {
-            if len >= MAX_PENDING_REQUESTS {
-                return Err(ReinitResponse {
-                    success: false,
-                    message: format!("refused: {len} requests already waiting; current track kept"),
-                });
-            }
-            core.admit_reinit(Instant::now())
-        };
+        let _ = self.ep.pub_det.publish(o.detections.clone());
+        let _ = self.ep.pub_status.publish(o.status.clone());
+    }
+
+    /// Admits a request by the queue bound and the node's rate limit, or says why not.
+    fn admit(&mut self) -> Result<(), ReinitResponse> {
+        let len = self.pending.len();
+        if len >= MAX_PENDING_REQUESTS {
+            return Err(ReinitResponse {
+                success: false,
+                message: format!("refused: {len} requests already waiting; current track kept"),
+            });
+        }
+        self.core.admit_reinit(Instant::now())
+    }
+
+    /// Step 1 of a turn: reads every request that arrived (reinit service, `init` topic,
+    /// stop service); refuses at once what the rate limit refuses.
+    fn read_requests(&mut self) {
         for _ in 0..MAX_REQUESTS_PER_TURN {
-            let Ok(Some((id, req))) = srv_reinit.receive_request() else {
+            let Ok(Some((id, req))) = self.ep.srv_reinit.receive_request() else {
                 break;
             };
-            match admit(&mut core, pending.len()) {
-                Ok(()) => pending.push_back(PendingReinit::Service(id, req)),
+            match self.admit() {
+                Ok(()) => self.pending.push_back(PendingReinit::Service(id, req)),
                 Err(resp) => {
                     // Each refusal is answered; the log gets one summary per period.
-                    refused = refused.saturating_add(1);
-                    last_refusal = resp.message.clone();
-                    let _ = srv_reinit.send_response(id, resp);
+                    self.refused = self.refused.saturating_add(1);
+                    self.last_refusal = resp.message.clone();
+                    let _ = self.ep.srv_reinit.send_response(id, resp);
                 }
             }
         }
         for _ in 0..MAX_REQUESTS_PER_TURN {
-            let Ok(Some((det, _))) = sub_init.take() else {
+            let Ok(Some((det, _))) = self.ep.sub_init.take() else {
                 break;
             };
             let b = crate::convert::bbox_from_detection(&det);
             let req = crate::convert::reinit_request(b, det.header.stamp, &det.header.frame_id);
-            match admit(&mut core, pending.len()) {
-                Ok(()) => pending.push_back(PendingReinit::Topic(req)),
+            match self.admit() {
+                Ok(()) => self.pending.push_back(PendingReinit::Topic(req)),
                 Err(resp) => {
-                    refused = refused.saturating_add(1);
-                    last_refusal = resp.message;
+                    self.refused = self.refused.saturating_add(1);
+                    self.last_refusal = resp.message;
                 }
             }
         }
         for _ in 0..MAX_REQUESTS_PER_TURN {
-            let Ok(Some((id, _))) = srv_stop.receive_request() else {
+            let Ok(Some((id, _))) = self.ep.srv_stop.receive_request() else {
                 break;
             };
-            let resp = core.on_stop();
-            log(
-                &node,
+            let resp = self.core.on_stop();
+            self.log(
                 ros2_client::log::LogLevel::Info,
                 &format!("stop: {}", resp.message),
             );
-            let _ = srv_stop.send_response(id, resp);
+            let _ = self.ep.srv_stop.send_response(id, resp);
         }
-        // 2. The newest camera frame.
+    }
+
+    /// Step 2: tracks the newest camera frame, if one arrived within [`WORKER_WAIT`].
+    fn track_newest(&mut self, slot: &Slot, observe: &mut impl FnMut(&FrameOutputs)) {
         match slot.take(WORKER_WAIT) {
             Some(Incoming::Raw(m, t)) => {
-                core.add_dropped(slot.dropped.swap(0, Ordering::Relaxed));
-                let o = core.on_image(CameraMsg::Raw(&m), t);
-                publish(&o);
+                self.core
+                    .add_dropped(slot.dropped.swap(0, Ordering::Relaxed));
+                let o = self.core.on_image(CameraMsg::Raw(&m), t);
+                self.publish(&o);
                 observe(&o);
             }
             Some(Incoming::Compressed(m, t)) => {
-                core.add_dropped(slot.dropped.swap(0, Ordering::Relaxed));
-                let o = core.on_image(CameraMsg::Compressed(&m), t);
-                publish(&o);
+                self.core
+                    .add_dropped(slot.dropped.swap(0, Ordering::Relaxed));
+                let o = self.core.on_image(CameraMsg::Compressed(&m), t);
+                self.publish(&o);
                 observe(&o);
             }
-            Some(Incoming::Error(e)) => log(
-                &node,
-                ros2_client::log::LogLevel::Warn,
-                &crate::convert::clip(&e),
-            ),
+            Some(Incoming::Error(e)) => {
+                self.log(ros2_client::log::LogLevel::Warn, &crate::convert::clip(&e))
+            }
             None => {}
         }
-        // 3. At most one admitted request per turn (bounded work: see NodeCore::on_reinit).
-        if let Some(p) = pending.pop_front() {
-            let (req, source) = match &p {
-                PendingReinit::Service(_, r) => (r, "reinit"),
-                PendingReinit::Topic(r) => (r, "init topic"),
-            };
-            let (resp, out) = core.on_reinit(req);
-            let level = if resp.success {
-                ros2_client::log::LogLevel::Info
-            } else {
-                ros2_client::log::LogLevel::Warn
-            };
-            log(&node, level, &format!("{source}: {}", resp.message));
-            if let Some(o) = out {
-                publish(&o);
-                observe(&o);
-            }
-            if let PendingReinit::Service(id, _) = p {
-                let _ = srv_reinit.send_response(id, resp);
-            }
+    }
+
+    /// Step 3: serves at most one admitted request per turn (bounded work: see
+    /// `NodeCore::on_reinit`).
+    fn serve_one_request(&mut self, observe: &mut impl FnMut(&FrameOutputs)) {
+        let Some(p) = self.pending.pop_front() else {
+            return;
+        };
+        let (req, source) = match &p {
+            PendingReinit::Service(_, r) => (r, "reinit"),
+            PendingReinit::Topic(r) => (r, "init topic"),
+        };
+        let (resp, out) = self.core.on_reinit(req);
+        let level = if resp.success {
+            ros2_client::log::LogLevel::Info
+        } else {
+            ros2_client::log::LogLevel::Warn
+        };
+        self.log(level, &format!("{source}: {}", resp.message));
+        if let Some(o) = out {
+            self.publish(&o);
+            observe(&o);
         }
-        let now = Instant::now();
-        if let Some(p) = &pub_debug {
-            if now >= next_debug {
-                if let Some(img) = core.debug_image() {
-                    next_debug = later(now, debug_period);
+        if let PendingReinit::Service(id, _) = p {
+            let _ = self.ep.srv_reinit.send_response(id, resp);
+        }
+    }
+
+    /// Step 4: the timers: the debug image, then status, diagnostics and the summary of
+    /// refused requests once per diagnostics period.
+    fn run_timers(&mut self, now: Instant) {
+        if let Some(p) = &self.ep.pub_debug {
+            if now >= self.next_debug {
+                if let Some(img) = self.core.debug_image() {
+                    self.next_debug = later(now, self.debug_period);
                     let _ = p.publish(img);
                 }
             }
         }
-        if now >= next_diag {
-            next_diag = later(now, settings.diagnostics_period);
-            if refused > 0 {
-                log(
-                    &node,
+        if now >= self.next_diag {
+            self.next_diag = later(now, self.settings.diagnostics_period);
+            if self.refused > 0 {
+                self.log(
                     ros2_client::log::LogLevel::Warn,
                     &format!(
-                        "{refused} re-initialisation request(s) refused, the last: {last_refusal}"
+                        "{} re-initialisation request(s) refused, the last: {}",
+                        self.refused, self.last_refusal
                     ),
                 );
-                refused = 0;
+                self.refused = 0;
             }
-            if let Some(s) = core.on_tick(now) {
-                let _ = pub_status.publish(s);
+            if let Some(s) = self.core.on_tick(now) {
+                let _ = self.ep.pub_status.publish(s);
             }
-            let _ = pub_diag.publish(core.diagnostics());
+            let _ = self.ep.pub_diag.publish(self.core.diagnostics());
         }
     }
-    log(&node, ros2_client::log::LogLevel::Info, "shutting down");
+}
+
+/// Runs the node until `shutdown` is set. `observe` sees every output set (for logs/tests).
+///
+/// # Errors
+/// [`RosError`] when DDS entities cannot be created.
+pub fn run(
+    core: NodeCore,
+    settings: &RosSettings,
+    shutdown: Arc<AtomicBool>,
+    mut observe: impl FnMut(&FrameOutputs),
+) -> Result<(), RosError> {
+    let (ep, camera) = create_endpoints(settings)?;
+    let debug_period =
+        Duration::try_from_secs_f64(1.0 / settings.debug_image_rate_hz).unwrap_or(MAX_PERIOD);
+    let slot = spawn_reception(camera, shutdown.clone())?;
+    let mut w = Worker {
+        core,
+        ep,
+        settings,
+        pending: Default::default(),
+        refused: 0,
+        last_refusal: String::new(),
+        next_diag: Instant::now(),
+        next_debug: Instant::now(),
+        debug_period,
+    };
+    w.log(
+        ros2_client::log::LogLevel::Info,
+        "started: waiting for images and an initial box",
+    );
+    while !shutdown.load(Ordering::Relaxed) {
+        w.read_requests();
+        w.track_newest(&slot, &mut observe);
+        w.serve_one_request(&mut observe);
+        w.run_timers(Instant::now());
+    }
+    w.log(ros2_client::log::LogLevel::Info, "shutting down");
     Ok(())
 }
 

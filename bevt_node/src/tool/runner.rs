@@ -4,7 +4,7 @@
 //! Failures (an unreadable frame, a tracker error) end the run early with the reason;
 //! every box computed before that is kept.
 
-use crate::dataset::{Sequence, SequenceEntry};
+use crate::tool::dataset::{Sequence, SequenceEntry};
 use bevt_core::{BBox, Frame, PixelFormat, TrackOutput, Tracker};
 use std::path::PathBuf;
 use std::sync::mpsc;

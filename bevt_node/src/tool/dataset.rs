@@ -1,4 +1,4 @@
-//! Datasets and annotation files.
+//! Datasets and annotation files (the offline tool's input).
 //!
 //! Three layouts are recognised by [`open_dataset`]:
 //! 1. **Manifest**: `DIR/sequences.json` listing each sequence's `img_dir`, `anno`,

@@ -16,9 +16,9 @@
 //! it implies ([`ranges`]); unknown parameters and values outside a range stop start-up
 //! with a message naming the parameter and its range.
 
-use crate::app::NodeSettings;
+use crate::node::app::NodeSettings;
+use crate::node::ros::RosSettings;
 use crate::params::load_config;
-use crate::ros::RosSettings;
 use bevt_core::TrackerSpec;
 use ros2_client::ServiceMapping;
 use serde_norway::Value;
@@ -174,20 +174,23 @@ pub fn params_from_file(
     Ok(out)
 }
 
-/// Builds the launch configuration from arguments (without the program name) and the
-/// environment lookup `env`.
-///
-/// # Errors
-/// [`LaunchError`] naming the argument or parameter at fault.
-pub fn launch_from_args(
-    args: &[String],
-    env: impl Fn(&str) -> Option<String>,
-) -> Result<Launch, LaunchError> {
-    let mut demo = false;
-    let mut demo_duration = Duration::from_secs(10);
-    let mut files = Vec::new();
-    let mut sets: Vec<(String, String)> = Vec::new();
-    let mut remaps = Vec::new();
+/// The command line, parsed but not yet interpreted.
+#[derive(Default)]
+struct CommandLine {
+    demo: bool,
+    demo_duration: Option<Duration>,
+    /// `--params-file` paths, in order.
+    files: Vec<String>,
+    /// `-p name:=value`, in order.
+    sets: Vec<(String, String)>,
+    /// `-r from:=to`, in order.
+    remaps: Vec<(String, String)>,
+}
+
+/// Splits the arguments into the node's own (`--demo`, `--duration`) and the
+/// `--ros-args` ones.
+fn parse_command_line(args: &[String]) -> Result<CommandLine, LaunchError> {
+    let mut cl = CommandLine::default();
     let mut it = args.iter();
     let mut ros = false;
     while let Some(a) = it.next() {
@@ -199,28 +202,28 @@ pub fn launch_from_args(
         match a.as_str() {
             "--ros-args" => ros = true,
             "--" => ros = false,
-            "--demo" if !ros => demo = true,
+            "--demo" if !ros => cl.demo = true,
             "--duration" if !ros => {
                 let v = next("--duration")?;
                 let s: f64 = v
                     .parse()
                     .map_err(|_| LaunchError::Args(format!("--duration {v:?}: not a number")))?;
-                demo_duration = seconds("--duration", s, ranges::DEMO_DURATION_S)?;
+                cl.demo_duration = Some(seconds("--duration", s, ranges::DEMO_DURATION_S)?);
             }
-            "--params-file" if ros => files.push(next("--params-file")?),
+            "--params-file" if ros => cl.files.push(next("--params-file")?),
             "-p" | "--param" if ros => {
                 let v = next("-p")?;
                 let (k, val) = v
                     .split_once(":=")
                     .ok_or_else(|| LaunchError::Args(format!("-p {v:?}: expected name:=value")))?;
-                sets.push((k.to_string(), val.to_string()));
+                cl.sets.push((k.to_string(), val.to_string()));
             }
             "-r" | "--remap" if ros => {
                 let v = next("-r")?;
                 let (k, val) = v
                     .split_once(":=")
                     .ok_or_else(|| LaunchError::Args(format!("-r {v:?}: expected from:=to")))?;
-                remaps.push((k.to_string(), val.to_string()));
+                cl.remaps.push((k.to_string(), val.to_string()));
             }
             "--log-level" if ros => {
                 next("--log-level")?;
@@ -231,29 +234,33 @@ pub fn launch_from_args(
             other => return Err(LaunchError::Args(format!("unknown argument {other:?}"))),
         }
     }
-    let mut ros_settings = RosSettings::default();
-    let mut node = NodeSettings::default();
-    let mut topic_remaps = Vec::new();
-    for (from, to) in remaps {
-        match from.as_str() {
-            "__ns" => ros_settings.namespace = to,
-            "__node" | "__name" => ros_settings.node_name = to,
-            _ => topic_remaps.push((from, to)),
-        }
-    }
-    ros_settings.remaps = topic_remaps;
-    node.node_name = ros_settings.node_name.clone();
+    Ok(cl)
+}
+
+/// Reads the parameters files in order, then the `-p` overrides on top.
+fn collect_params(
+    files: &[String],
+    sets: Vec<(String, String)>,
+    node_name: &str,
+) -> Result<BTreeMap<String, Value>, LaunchError> {
     let mut params = BTreeMap::new();
-    for f in &files {
+    for f in files {
         let text = std::fs::read_to_string(f)
             .map_err(|e| param_err("--params-file", format!("{f}: {e}")))?;
-        params.extend(params_from_file(&text, &ros_settings.node_name)?);
+        params.extend(params_from_file(&text, node_name)?);
     }
     for (k, v) in sets {
         let val: Value = serde_norway::from_str(&v).map_err(|e| param_err(&k, e.to_string()))?;
         params.insert(k, val);
     }
-    // Environment first, parameters override it.
+    Ok(params)
+}
+
+/// `ROS_DOMAIN_ID` and `ROS_LOCALHOST_ONLY` (parameters override them).
+fn apply_env(
+    env: impl Fn(&str) -> Option<String>,
+    ros_settings: &mut RosSettings,
+) -> Result<(), LaunchError> {
     if let Some(d) = env("ROS_DOMAIN_ID").filter(|s| !s.trim().is_empty()) {
         ros_settings.domain_id = d
             .trim()
@@ -267,118 +274,127 @@ pub fn launch_from_args(
     if env("ROS_LOCALHOST_ONLY").as_deref() == Some("1") {
         ros_settings.networks = vec![IpAddr::from([127, 0, 0, 1])];
     }
-    let mut tracker_sets = Vec::new();
-    for (k, v) in &params {
-        let as_f64 = || v.as_f64().ok_or_else(|| param_err(k, "expected a number"));
-        let as_u64 = || {
-            v.as_u64()
-                .ok_or_else(|| param_err(k, "expected a non-negative integer"))
-        };
-        match k.as_str() {
-            "domain_id" => {
-                ros_settings.domain_id = u16::try_from(as_u64()?)
-                    .ok()
-                    .filter(|d| *d <= 232)
-                    .ok_or_else(|| param_err(k, "expected 0..=232"))?
-            }
-            "network_interfaces" => {
-                let list = v
-                    .as_sequence()
-                    .ok_or_else(|| param_err(k, "expected a list of addresses"))?;
-                ros_settings.networks = list
-                    .iter()
-                    .map(|a| {
-                        a.as_str()
-                            .and_then(|s| s.parse::<IpAddr>().ok())
-                            .filter(IpAddr::is_ipv4)
-                            .ok_or_else(|| param_err(k, format!("{a:?} is not an IPv4 address")))
-                    })
-                    .collect::<Result<_, _>>()?;
-                if ros_settings.networks.is_empty() {
-                    return Err(param_err(
-                        k,
-                        "empty: list the addresses to listen on (\"0.0.0.0\" = all interfaces)",
-                    ));
-                }
-                if ros_settings.networks.len() > 1
-                    && ros_settings.networks.iter().any(IpAddr::is_unspecified)
-                {
-                    return Err(param_err(
-                        k,
-                        "0.0.0.0 (all interfaces) cannot be combined with other addresses",
-                    ));
-                }
-            }
-            "dds_max_sample_bytes" => {
-                ros_settings.max_sample_bytes = int_in(k, v, ranges::DDS_MAX_SAMPLE_BYTES)? as usize
-            }
-            "service_mapping" => {
-                ros_settings.service_mapping = match v.as_str() {
-                    Some("enhanced") => ServiceMapping::Enhanced,
-                    Some("cyclone") => ServiceMapping::Cyclone,
-                    _ => {
-                        return Err(param_err(
-                            k,
-                            "expected enhanced (Fast DDS) or cyclone (rmw_cyclonedds)",
-                        ))
-                    }
-                }
-            }
-            "max_image_width" => {
-                node.image_limits.max_width = int_in(k, v, ranges::IMAGE_SIDE)? as u32
-            }
-            "max_image_height" => {
-                node.image_limits.max_height = int_in(k, v, ranges::IMAGE_SIDE)? as u32
-            }
-            "max_image_pixels" => {
-                node.image_limits.max_pixels = int_in(k, v, ranges::IMAGE_PIXELS)?
-            }
-            "reinit_buffer_frames" => {
-                node.reinit_buffer_frames = int_in(k, v, ranges::BUFFER_FRAMES)? as usize
-            }
-            "reinit_buffer_mb" => {
-                node.reinit_buffer_bytes = (int_in(k, v, ranges::BUFFER_MB)? * MIB) as usize
-            }
-            "reinit_max_fast_forward" => {
-                node.reinit_max_fast_forward = int_in(k, v, ranges::FAST_FORWARD)? as usize
-            }
-            "reinit_rate_hz" => {
-                node.reinit_rate_hz = float_in(k, as_f64()?, ranges::REINIT_RATE_HZ, "Hz")?
-            }
-            "reinit_burst" => node.reinit_burst = int_in(k, v, ranges::REINIT_BURST)? as u32,
-            "stale_timeout_s" => {
-                node.stale_timeout = seconds(k, as_f64()?, ranges::STALE_TIMEOUT_S)?
-            }
-            "diagnostics_period_s" => {
-                ros_settings.diagnostics_period =
-                    seconds(k, as_f64()?, ranges::DIAGNOSTICS_PERIOD_S)?
-            }
-            "debug_image_rate_hz" => {
-                let r = as_f64()?;
-                ros_settings.debug_image_rate_hz = if r == 0.0 {
-                    0.0
-                } else {
-                    float_in(k, r, ranges::DEBUG_IMAGE_RATE_HZ, "Hz (or 0 = off)")?
-                };
-            }
-            "class_id" => {
-                let c = v
-                    .as_str()
-                    .ok_or_else(|| param_err(k, "expected a string"))?;
-                let (lo, hi) = ranges::CLASS_ID_CHARS;
-                if !(lo..=hi).contains(&(c.chars().count() as u64)) {
-                    return Err(param_err(k, format!("expected {lo}..={hi} characters")));
-                }
-                node.class_id = c.to_string();
-            }
-            name if name.starts_with("tracker.") => {
-                let text = serde_norway::to_string(v).map_err(|e| param_err(k, e.to_string()))?;
-                tracker_sets.push(format!("{}={}", &name["tracker.".len()..], text.trim()));
-            }
-            _ => return Err(param_err(k, "unknown parameter")),
-        }
+    Ok(())
+}
+
+/// The `network_interfaces` parameter: IPv4 addresses, not empty, `0.0.0.0` alone.
+fn parse_networks(k: &str, v: &Value) -> Result<Vec<IpAddr>, LaunchError> {
+    let list = v
+        .as_sequence()
+        .ok_or_else(|| param_err(k, "expected a list of addresses"))?;
+    let networks: Vec<IpAddr> = list
+        .iter()
+        .map(|a| {
+            a.as_str()
+                .and_then(|s| s.parse::<IpAddr>().ok())
+                .filter(IpAddr::is_ipv4)
+                .ok_or_else(|| param_err(k, format!("{a:?} is not an IPv4 address")))
+        })
+        .collect::<Result<_, _>>()?;
+    if networks.is_empty() {
+        return Err(param_err(
+            k,
+            "empty: list the addresses to listen on (\"0.0.0.0\" = all interfaces)",
+        ));
     }
-    // One largest frame must fit the re-initialisation buffer.
+    if networks.len() > 1 && networks.iter().any(IpAddr::is_unspecified) {
+        return Err(param_err(
+            k,
+            "0.0.0.0 (all interfaces) cannot be combined with other addresses",
+        ));
+    }
+    Ok(networks)
+}
+
+/// Applies one node parameter to the settings; `tracker.*` ones are collected as
+/// `key=value` overrides for [`load_config`].
+fn apply_param(
+    k: &str,
+    v: &Value,
+    ros_settings: &mut RosSettings,
+    node: &mut NodeSettings,
+    tracker_sets: &mut Vec<String>,
+) -> Result<(), LaunchError> {
+    let as_f64 = || v.as_f64().ok_or_else(|| param_err(k, "expected a number"));
+    let as_u64 = || {
+        v.as_u64()
+            .ok_or_else(|| param_err(k, "expected a non-negative integer"))
+    };
+    match k {
+        "domain_id" => {
+            ros_settings.domain_id = u16::try_from(as_u64()?)
+                .ok()
+                .filter(|d| *d <= 232)
+                .ok_or_else(|| param_err(k, "expected 0..=232"))?
+        }
+        "network_interfaces" => ros_settings.networks = parse_networks(k, v)?,
+        "dds_max_sample_bytes" => {
+            ros_settings.max_sample_bytes = int_in(k, v, ranges::DDS_MAX_SAMPLE_BYTES)? as usize
+        }
+        "service_mapping" => {
+            ros_settings.service_mapping = match v.as_str() {
+                Some("enhanced") => ServiceMapping::Enhanced,
+                Some("cyclone") => ServiceMapping::Cyclone,
+                _ => {
+                    return Err(param_err(
+                        k,
+                        "expected enhanced (Fast DDS) or cyclone (rmw_cyclonedds)",
+                    ))
+                }
+            }
+        }
+        "max_image_width" => node.image_limits.max_width = int_in(k, v, ranges::IMAGE_SIDE)? as u32,
+        "max_image_height" => {
+            node.image_limits.max_height = int_in(k, v, ranges::IMAGE_SIDE)? as u32
+        }
+        "max_image_pixels" => node.image_limits.max_pixels = int_in(k, v, ranges::IMAGE_PIXELS)?,
+        "reinit_buffer_frames" => {
+            node.reinit_buffer_frames = int_in(k, v, ranges::BUFFER_FRAMES)? as usize
+        }
+        "reinit_buffer_mb" => {
+            node.reinit_buffer_bytes = (int_in(k, v, ranges::BUFFER_MB)? * MIB) as usize
+        }
+        "reinit_max_fast_forward" => {
+            node.reinit_max_fast_forward = int_in(k, v, ranges::FAST_FORWARD)? as usize
+        }
+        "reinit_rate_hz" => {
+            node.reinit_rate_hz = float_in(k, as_f64()?, ranges::REINIT_RATE_HZ, "Hz")?
+        }
+        "reinit_burst" => node.reinit_burst = int_in(k, v, ranges::REINIT_BURST)? as u32,
+        "stale_timeout_s" => node.stale_timeout = seconds(k, as_f64()?, ranges::STALE_TIMEOUT_S)?,
+        "diagnostics_period_s" => {
+            ros_settings.diagnostics_period = seconds(k, as_f64()?, ranges::DIAGNOSTICS_PERIOD_S)?
+        }
+        "debug_image_rate_hz" => {
+            let r = as_f64()?;
+            ros_settings.debug_image_rate_hz = if r == 0.0 {
+                0.0
+            } else {
+                float_in(k, r, ranges::DEBUG_IMAGE_RATE_HZ, "Hz (or 0 = off)")?
+            };
+        }
+        "class_id" => {
+            let c = v
+                .as_str()
+                .ok_or_else(|| param_err(k, "expected a string"))?;
+            let (lo, hi) = ranges::CLASS_ID_CHARS;
+            if !(lo..=hi).contains(&(c.chars().count() as u64)) {
+                return Err(param_err(k, format!("expected {lo}..={hi} characters")));
+            }
+            node.class_id = c.to_string();
+        }
+        name if name.starts_with("tracker.") => {
+            let text = serde_norway::to_string(v).map_err(|e| param_err(k, e.to_string()))?;
+            tracker_sets.push(format!("{}={}", &name["tracker.".len()..], text.trim()));
+        }
+        _ => return Err(param_err(k, "unknown parameter")),
+    }
+    Ok(())
+}
+
+/// Checks that one largest frame fits the re-initialisation buffer and one largest raw
+/// image message fits a DDS sample.
+fn check_size_limits(ros_settings: &RosSettings, node: &NodeSettings) -> Result<(), LaunchError> {
     let frame_bytes = node
         .image_limits
         .max_pixels
@@ -394,8 +410,7 @@ pub fn launch_from_args(
             ),
         ));
     }
-    // One largest raw image message must fit a DDS sample.
-    let message_bytes = frame_bytes.saturating_add(crate::ros::SAMPLE_OVERHEAD_BYTES as u64);
+    let message_bytes = frame_bytes.saturating_add(crate::node::ros::SAMPLE_OVERHEAD_BYTES as u64);
     if (ros_settings.max_sample_bytes as u64) < message_bytes {
         return Err(param_err(
             "dds_max_sample_bytes",
@@ -404,17 +419,50 @@ pub fn launch_from_args(
                  max_image_pixels {} + {} KiB)",
                 ros_settings.max_sample_bytes,
                 node.image_limits.max_pixels,
-                crate::ros::SAMPLE_OVERHEAD_BYTES / 1024
+                crate::node::ros::SAMPLE_OVERHEAD_BYTES / 1024
             ),
         ));
     }
+    Ok(())
+}
+
+/// Builds the launch configuration from arguments (without the program name) and the
+/// environment lookup `env`.
+///
+/// # Errors
+/// [`LaunchError`] naming the argument or parameter at fault.
+pub fn launch_from_args(
+    args: &[String],
+    env: impl Fn(&str) -> Option<String>,
+) -> Result<Launch, LaunchError> {
+    let cl = parse_command_line(args)?;
+    let mut ros_settings = RosSettings::default();
+    let mut node = NodeSettings::default();
+    let mut topic_remaps = Vec::new();
+    for (from, to) in cl.remaps {
+        match from.as_str() {
+            "__ns" => ros_settings.namespace = to,
+            "__node" | "__name" => ros_settings.node_name = to,
+            _ => topic_remaps.push((from, to)),
+        }
+    }
+    ros_settings.remaps = topic_remaps;
+    node.node_name = ros_settings.node_name.clone();
+    let params = collect_params(&cl.files, cl.sets, &ros_settings.node_name)?;
+    // Environment first, parameters override it.
+    apply_env(env, &mut ros_settings)?;
+    let mut tracker_sets = Vec::new();
+    for (k, v) in &params {
+        apply_param(k, v, &mut ros_settings, &mut node, &mut tracker_sets)?;
+    }
+    check_size_limits(&ros_settings, &node)?;
     let tracker = load_config(None, &tracker_sets)?;
     Ok(Launch {
         ros: ros_settings,
         node,
         tracker,
-        demo,
-        demo_duration,
+        demo: cl.demo,
+        demo_duration: cl.demo_duration.unwrap_or(Duration::from_secs(10)),
     })
 }
 
@@ -486,7 +534,7 @@ mod tests {
 
     #[test]
     fn the_shipped_parameters_file_loads() {
-        let text = include_str!("../../config/node.yaml");
+        let text = include_str!("../../../config/node.yaml");
         let p = params_from_file(text, "bevt_node").unwrap();
         assert!(
             !p.contains_key("domain_id"),
@@ -614,6 +662,9 @@ mod tests {
         assert_eq!(l.ros.max_sample_bytes, 1 << 20);
         let l = launch_from_args(&[], none).unwrap();
         assert_eq!(l.ros.networks, vec![IpAddr::from([127, 0, 0, 1])]);
-        assert_eq!(l.ros.max_sample_bytes, crate::ros::DEFAULT_MAX_SAMPLE_BYTES);
+        assert_eq!(
+            l.ros.max_sample_bytes,
+            crate::node::ros::DEFAULT_MAX_SAMPLE_BYTES
+        );
     }
 }

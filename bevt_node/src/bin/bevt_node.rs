@@ -7,12 +7,12 @@
 use anyhow::{Context as _, Result};
 use bevt_core::eval::synth::SynthParams;
 use bevt_msgs::builtin_interfaces::Time;
-use bevt_node::app::NodeCore;
 use bevt_node::convert::bbox_from_detection;
 use bevt_node::convert::reinit_request;
-use bevt_node::node_params::{launch_from_args, Launch};
-use bevt_node::ros;
-use bevt_node::sim::{spawn_camera, GroundStation};
+use bevt_node::node::app::NodeCore;
+use bevt_node::node::node_params::{launch_from_args, Launch};
+use bevt_node::node::ros;
+use bevt_node::node::sim::{spawn_camera, GroundStation};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;

@@ -39,7 +39,7 @@ const DEBUG_LINE_PX: i64 = 2;
 const SLOT_SLACK: usize = 4;
 
 /// Settings of the node logic. Ranges are checked where they are loaded
-/// ([`crate::node_params`]); values outside them are clamped here so nothing panics.
+/// ([`crate::node::node_params`]); values outside them are clamped here so nothing panics.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NodeSettings {
     /// `class_id` of published hypotheses.

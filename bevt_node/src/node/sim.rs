@@ -2,7 +2,9 @@
 //! integration tests and the latency benchmark: the same code a real deployment's
 //! peers would run, with exact ground truth.
 
-use crate::ros::{camera_qos, context, output_qos, ros_name, service_qos, RosError, RosSettings};
+use crate::node::ros::{
+    camera_qos, context, output_qos, ros_name, service_qos, RosError, RosSettings,
+};
 use bevt_core::eval::synth::SynthParams;
 use bevt_core::BBox;
 use bevt_msgs::bevt::{ReinitRequest, ReinitResponse, TrackStatus};
@@ -58,7 +60,7 @@ pub fn spawn_camera(
     let ctx = context(settings)?;
     let mut cam = node(&ctx, "bevt_sim_camera")?;
     // The node's input name, resolved in its namespace (absolute).
-    let abs = ros_name(settings, crate::ros::names::IMAGE)?;
+    let abs = ros_name(settings, crate::node::ros::names::IMAGE)?;
     let topic = cam
         .create_topic(
             &abs,
@@ -162,7 +164,7 @@ impl GroundStation {
         let client = n
             .create_client::<ReinitRequest, ReinitResponse>(
                 settings.service_mapping,
-                &abs(crate::ros::names::REINIT)?,
+                &abs(crate::node::ros::names::REINIT)?,
                 &ServiceTypeName::new("bevt_msgs", "Reinit"),
                 service_qos(),
                 service_qos(),
@@ -173,7 +175,7 @@ impl GroundStation {
             })?;
         let topic = n
             .create_topic(
-                &abs(crate::ros::names::DETECTIONS)?,
+                &abs(crate::node::ros::names::DETECTIONS)?,
                 MessageTypeName::new(Detection2DArray::PACKAGE, Detection2DArray::NAME),
                 &sq,
             )
@@ -189,7 +191,7 @@ impl GroundStation {
             })?;
         let st = n
             .create_topic(
-                &abs(crate::ros::names::TRACK_STATUS)?,
+                &abs(crate::node::ros::names::TRACK_STATUS)?,
                 MessageTypeName::new(TrackStatus::PACKAGE, TrackStatus::NAME),
                 &sq,
             )
@@ -319,7 +321,7 @@ impl RawPeer {
         let oq = output_qos();
         let t = n
             .create_topic(
-                &ros_name(settings, crate::ros::names::IMAGE)?,
+                &ros_name(settings, crate::node::ros::names::IMAGE)?,
                 MessageTypeName::new(Image::PACKAGE, Image::NAME),
                 &cq,
             )
@@ -329,7 +331,7 @@ impl RawPeer {
             .map_err(err("image publisher"))?;
         let t = n
             .create_topic(
-                &ros_name(settings, crate::ros::names::IMAGE_COMPRESSED)?,
+                &ros_name(settings, crate::node::ros::names::IMAGE_COMPRESSED)?,
                 MessageTypeName::new(CompressedImage::PACKAGE, CompressedImage::NAME),
                 &cq,
             )
@@ -339,7 +341,7 @@ impl RawPeer {
             .map_err(err("compressed publisher"))?;
         let t = n
             .create_topic(
-                &ros_name(settings, crate::ros::names::INIT)?,
+                &ros_name(settings, crate::node::ros::names::INIT)?,
                 MessageTypeName::new("vision_msgs", "Detection2D"),
                 &oq,
             )

@@ -4,8 +4,8 @@
 //! annotated frames (NaN ground truth excluded), then averaged over sequences. Sequences
 //! that failed are listed with their reason and left out of the averages.
 
-use crate::dataset::{format_annotation_row, parse_annotation, Dataset};
-use crate::runner::SequenceRun;
+use crate::tool::dataset::{format_annotation_row, parse_annotation, Dataset};
+use crate::tool::runner::SequenceRun;
 use bevt_core::eval::lost::{label_frames, reacquire_frames, score_lost, FrameLabel, LostScores};
 use bevt_core::eval::metrics::{mean_curve, score_sequence, SequenceScores};
 use bevt_core::{BBox, TrackState};
@@ -551,7 +551,7 @@ pub fn console_table(s: &Summary) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::runner::TrackRun;
+    use crate::tool::runner::TrackRun;
 
     #[test]
     fn consensus_quantiles_are_nearest_rank() {

@@ -1,0 +1,7 @@
+//! The live ROS 2 tracking node: decisions in [`app`], DDS in [`ros`], start-up arguments in
+//! [`node_params`], and the synthetic camera and ground station its tests talk to in [`sim`].
+
+pub mod app;
+pub mod node_params;
+pub mod ros;
+pub mod sim;
