@@ -16,9 +16,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 /// Frames sent to the peer.
-const FRAMES: usize = 60;
+pub(crate) const FRAMES: usize = 60;
 /// Camera rate of the peer.
-const RATE_HZ: f64 = 10.0;
+pub(crate) const RATE_HZ: f64 = 10.0;
+/// Centre error counted as a hit: 20 px at full resolution = 10 px on the 2x downscaled
+/// frames (the synthetic sequence is not scaled; 10 px is stricter there).
+pub(crate) const HIT_PX: f32 = 10.0;
 
 pub(crate) fn python() -> Result<PathBuf, String> {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/python-env.sh");
@@ -39,7 +42,7 @@ pub(crate) fn python() -> Result<PathBuf, String> {
 }
 
 /// Writes raw rgb8 frames + meta.json; returns the ground truth per frame.
-fn write_frames(dir: &Path) -> Vec<Option<BBox>> {
+pub(crate) fn write_frames(dir: &Path) -> Vec<Option<BBox>> {
     let mut truth = Vec::new();
     let (w, h);
     if let Some(root) = dev_dataset() {
@@ -118,13 +121,56 @@ fn an_independent_cyclone_dds_peer_drives_the_node() {
         out.status,
         String::from_utf8_lossy(&out.stderr)
     );
-    let mut reinit_ok = false;
-    let (mut n, mut good) = (0usize, 0usize);
+    let scored = score(&stdout, &truth);
+    let reinit_ok = scored
+        .reinit
+        .as_ref()
+        .is_some_and(|r| r["success"].as_bool() == Some(true));
+    let (n, good) = (scored.n, scored.good);
+    println!(
+        "interop (Cyclone DDS): {n} detections matched to frames, {good} within {HIT_PX} px \
+         (20 px full-size); centre error mean {:.1} px, max {:.1} px",
+        scored.mean_err, scored.max_err
+    );
+    assert!(reinit_ok, "reinit over Cyclone DDS failed:\n{stdout}");
+    assert!(n >= FRAMES / 2, "only {n} detections for {FRAMES} frames");
+    assert!(
+        good * 10 >= n * 9,
+        "{good}/{n} within the precision threshold"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// What a peer's output says: the reinit reply and the detections scored against truth.
+pub(crate) struct Scored {
+    /// The peer's `{"reinit": ...}` object.
+    pub reinit: Option<serde_json::Value>,
+    /// Detections matched to a frame with ground truth.
+    pub n: usize,
+    /// Of those, within [`HIT_PX`] of the truth centre.
+    pub good: usize,
+    /// Largest centre error, pixels.
+    pub max_err: f32,
+    /// Mean centre error, pixels.
+    pub mean_err: f32,
+}
+
+/// Scores the peer's JSON lines (`{"reinit": ..}`, `{"frame": i, "box": [x, y, w, h]}`;
+/// other lines ignored) against the ground truth.
+pub(crate) fn score(stdout: &str, truth: &[Option<BBox>]) -> Scored {
+    let mut s = Scored {
+        reinit: None,
+        n: 0,
+        good: 0,
+        max_err: 0.0,
+        mean_err: 0.0,
+    };
+    let mut sum = 0.0;
     for line in stdout.lines() {
         let v: serde_json::Value = serde_json::from_str(line).unwrap();
         if let Some(r) = v.get("reinit") {
-            reinit_ok = r["success"].as_bool() == Some(true);
             println!("reinit: {r}");
+            s.reinit = Some(r.clone());
         } else if let Some(i) = v["frame"].as_i64() {
             let Some(Some(t)) = usize::try_from(i).ok().and_then(|i| truth.get(i)) else {
                 continue;
@@ -135,20 +181,19 @@ fn an_independent_cyclone_dds_peer_drives_the_node() {
                 .iter()
                 .map(|x| x.as_f64().unwrap() as f32)
                 .collect();
-            let bb = BBox::new(b[0], b[1], b[2], b[3]);
-            n += 1;
-            // 20 px at full resolution = 10 px here.
-            if bb.center().distance(&t.center()) <= 10.0 {
-                good += 1;
+            let err = BBox::new(b[0], b[1], b[2], b[3])
+                .center()
+                .distance(&t.center());
+            s.n += 1;
+            sum += err;
+            s.max_err = s.max_err.max(err);
+            if err <= HIT_PX {
+                s.good += 1;
             }
         }
     }
-    println!("interop: {n} detections matched to frames, {good} within 10 px (20 px full-size)");
-    assert!(reinit_ok, "reinit over Cyclone DDS failed:\n{stdout}");
-    assert!(n >= FRAMES / 2, "only {n} detections for {FRAMES} frames");
-    assert!(
-        good * 10 >= n * 9,
-        "{good}/{n} within the precision threshold"
-    );
-    let _ = std::fs::remove_dir_all(&dir);
+    if s.n > 0 {
+        s.mean_err = sum / s.n as f32;
+    }
+    s
 }

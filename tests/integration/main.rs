@@ -5,6 +5,7 @@ mod bad_input;
 #[cfg(feature = "cnn")]
 mod cnn;
 mod dds_hardening;
+mod fastdds_interop;
 mod interop;
 mod lost;
 mod node;
