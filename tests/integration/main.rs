@@ -11,5 +11,6 @@ mod lost;
 mod node;
 mod node_limits;
 mod real_data;
+mod ros_tools;
 mod synthetic;
 mod tool;

@@ -34,7 +34,8 @@ use thiserror::Error;
 pub mod names {
     /// Raw camera images in.
     pub const IMAGE: &str = "image_raw";
-    /// Compressed camera images in.
+    /// Compressed camera images in: `<raw topic>/compressed` when [`IMAGE`] is remapped
+    /// (image_transport's naming; see [`super::ros_name`]).
     pub const IMAGE_COMPRESSED: &str = "image_raw/compressed";
     /// Initial boxes in (`vision_msgs/Detection2D`, header stamp = the frame's).
     pub const INIT: &str = "init";
@@ -148,20 +149,35 @@ impl Default for RosSettings {
 /// Resolves a name like `image_raw/compressed` or `/diagnostics` (after remapping) to an
 /// absolute name in the node's namespace. (Resolving here, rather than leaving relative
 /// names to ros2-client, avoids its `rt//name` for nodes in the root namespace.)
+///
+/// The compressed input follows the raw one as image_transport subscribers do:
+/// [`names::IMAGE_COMPRESSED`] resolves to the raw topic's name + `/compressed`, so
+/// `-r image_raw:=/camera/image_raw` moves it to `/camera/image_raw/compressed`; a remap
+/// of `image_raw/compressed` itself takes precedence.
 pub fn ros_name(settings: &RosSettings, name: &str) -> Result<Name, RosError> {
-    let name = settings
-        .remaps
-        .iter()
-        .find(|(from, _)| from == name)
-        .map_or(name, |(_, to)| to.as_str());
+    let remapped = |name: &str| {
+        settings
+            .remaps
+            .iter()
+            .find(|(from, _)| from == name)
+            .map(|(_, to)| to.clone())
+    };
+    let name = match remapped(name) {
+        Some(to) => to,
+        None if name == names::IMAGE_COMPRESSED => match remapped(names::IMAGE) {
+            Some(raw) => format!("{}/compressed", raw.trim_end_matches('/')),
+            None => name.to_string(),
+        },
+        None => name.to_string(),
+    };
     let full = if name.starts_with('/') {
-        name.to_string()
+        name.clone()
     } else {
         format!("{}/{}", settings.namespace.trim_end_matches('/'), name)
     };
     let (ns, base) = full.rsplit_once('/').unwrap_or(("", &full));
     Name::new(if ns.is_empty() { "/" } else { ns }, base)
-        .map_err(|e| RosError::Name(name.to_string(), format!("{e:?}")))
+        .map_err(|e| RosError::Name(name.clone(), format!("{e:?}")))
 }
 
 /// A DDS context that listens and sends only on `settings.networks` (`0.0.0.0`: all
@@ -645,5 +661,35 @@ mod tests {
         );
         s.remaps.push(("detections".into(), "bad name!".into()));
         assert!(ros_name(&s, names::DETECTIONS).is_err());
+    }
+
+    #[test]
+    fn the_compressed_input_follows_the_raw_topic_as_image_transport_does() {
+        let node = NodeName::new("/drone", "bevt_node").unwrap();
+        let dds = |s: &RosSettings| {
+            ros_name(s, names::IMAGE_COMPRESSED)
+                .unwrap()
+                .to_dds_name("rt", &node, "")
+        };
+        let mut s = RosSettings::default();
+        assert_eq!(dds(&s), "rt/image_raw/compressed");
+        s.remaps
+            .push(("image_raw".into(), "/camera/image_raw".into()));
+        assert_eq!(dds(&s), "rt/camera/image_raw/compressed");
+        // A relative remap stays in the namespace.
+        s.namespace = "/drone".into();
+        s.remaps = vec![("image_raw".into(), "cam/image".into())];
+        assert_eq!(dds(&s), "rt/drone/cam/image/compressed");
+        // An explicit remap of the compressed topic wins.
+        s.remaps
+            .push(("image_raw/compressed".into(), "/jpeg/stream".into()));
+        assert_eq!(dds(&s), "rt/jpeg/stream");
+        // The raw topic itself is unaffected by the compressed rule.
+        assert_eq!(
+            ros_name(&s, names::IMAGE)
+                .unwrap()
+                .to_dds_name("rt", &node, ""),
+            "rt/drone/cam/image"
+        );
     }
 }
