@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Module evaluation on the dev set: the authors' reference (config/bevt_reference.yaml), each
-# fast-mode addition alone on top of it, all of them together (config/bevt_fast.yaml, rows
+# fast-mode addition alone on top of it, all of them together (the default config/bevt.yaml, rows
 # "default*"), then the fast mode with one module changed back at a time; plus the reference's own modules
 # (verification, enhanced background learning, beta, grayscale). Accuracy is deterministic;
 # fps is indicative (run on a quiet machine). Prints a Markdown table with the mean over the
@@ -14,7 +14,7 @@ out=${2:-results/ablation}
 cargo build --release -p bevt_node --bin bevt >/dev/null
 bevt=target/release/bevt
 ref=(--config config/bevt_reference.yaml)
-fast=(--config config/bevt_fast.yaml)
+fast=(--config config/bevt.yaml)
 run() {
   local name=$1; shift
   "$bevt" eval --dataset "$dataset" --out "$out/$name" --threads 1 "$@" >/dev/null || true

@@ -188,13 +188,10 @@ fn stages(c: &mut Criterion) {
     // A whole update on HD frames (features + FFT + detection + verification + training),
     // with the default configuration and with the reference one.
     let frames: Vec<_> = (0..seq.frames).map(|i| seq.frame(i)).collect();
-    let fast: TrackerConfig =
-        serde_norway::from_str(include_str!("../../config/bevt_fast.yaml")).unwrap();
     let reference: TrackerConfig =
         serde_norway::from_str(include_str!("../../config/bevt_reference.yaml")).unwrap();
     for (name, spec) in [
         ("default", spec.clone()),
-        ("fast (bevt_fast.yaml)", fast.validate().unwrap()),
         ("reference", reference.validate().unwrap()),
     ] {
         let mut tracker = BevtTracker::new(spec);

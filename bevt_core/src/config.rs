@@ -52,7 +52,7 @@ impl Default for FeatureConfig {
             kind: FeatureKind::Hog,
             hog_cell_size: 4,
             grayscale: true,
-            colornames: false,
+            colornames: true,
             gain: 1.0,
             cnn: None,
         }
@@ -124,7 +124,7 @@ impl Default for AdmmConfig {
             beta: 20.0,
             mu_max: 10000.0,
             lambda: 0.01,
-            penalty: PenaltyKind::Matrix,
+            penalty: PenaltyKind::Elementwise,
             spatial_weight: 10.0,
             reg_window_min: 0.1,
             reg_window_edge: 0.8,
@@ -202,7 +202,7 @@ pub struct DetectionConfig {
 impl Default for DetectionConfig {
     fn default() -> Self {
         Self {
-            scale_estimator: ScaleEstimator::Search,
+            scale_estimator: ScaleEstimator::Filter,
             number_of_scales: 5,
             scale_step: 1.01,
             newton_iterations: 50,
@@ -240,7 +240,7 @@ impl Default for LearningConfig {
         Self {
             rate: 0.013,
             reinforced_rate: 0.019,
-            training_sample: TrainingSample::Fresh,
+            training_sample: TrainingSample::Shifted,
         }
     }
 }
@@ -1109,16 +1109,20 @@ mod tests {
     }
 
     #[test]
-    fn fast_yaml_is_the_default_plus_the_fast_mode_additions() {
-        let text = include_str!("../../config/bevt_fast.yaml");
-        let c: TrackerConfig = serde_norway::from_str(text).unwrap();
-        c.validate().unwrap();
-        let mut want = TrackerConfig::default();
-        want.features.colornames = true;
-        want.detection.scale_estimator = ScaleEstimator::Filter;
-        want.learning.training_sample = TrainingSample::Shifted;
-        want.admm.penalty = PenaltyKind::Elementwise;
-        assert_eq!(c, want);
+    fn default_is_the_reference_plus_the_fast_mode_and_issue_8() {
+        let text = include_str!("../../config/bevt_reference.yaml");
+        let mut c: TrackerConfig = serde_norway::from_str(text).unwrap();
+        assert_ne!(c, TrackerConfig::default());
+        // The fast-mode additions (README "Ablation").
+        c.features.colornames = true;
+        c.detection.scale_estimator = ScaleEstimator::Filter;
+        c.learning.training_sample = TrainingSample::Shifted;
+        c.admm.penalty = PenaltyKind::Elementwise;
+        // Issue 8: the confidence gate, the lost state and re-detection.
+        c.verification.score = VerificationScore::Confidence;
+        c.track_state = TrackStateConfig::default();
+        c.redetection = RedetectionConfig::default();
+        assert_eq!(c, TrackerConfig::default());
     }
 
     #[test]

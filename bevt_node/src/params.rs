@@ -4,7 +4,7 @@ use bevt_core::{TrackerConfig, TrackerSpec};
 use std::path::Path;
 use thiserror::Error;
 
-/// The shipped reference configuration (`config/bevt.yaml`), embedded so the tools work
+/// The shipped default configuration (`config/bevt.yaml`), embedded so the tools work
 /// without any file.
 pub const DEFAULT_CONFIG_YAML: &str = include_str!("../../config/bevt.yaml");
 

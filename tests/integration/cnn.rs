@@ -3,7 +3,7 @@
 //! at init. Needs ONNX Runtime (`ORT_DYLIB_PATH`, see scripts/onnxruntime.sh): skipped with
 //! a printed reason without it.
 
-use bevt_core::config::FeatureKind;
+use bevt_core::config::{FeatureKind, ScaleEstimator, TrainingSample};
 use bevt_core::eval::synth::SynthParams;
 use bevt_core::features::cnn::{CnnError, CnnExtractor, ORT_DYLIB_ENV};
 use bevt_core::features::cnn_config::{CnnConfig, CnnLayerConfig, InputSizePolicy, LayerNorm};
@@ -95,6 +95,10 @@ fn tiny_model_tracks_a_synthetic_target_end_to_end() {
     // training sample shifted from the detection features.
     for (single_pass, from_detection) in [(false, false), (true, false), (false, true)] {
         let mut cfg = TrackerConfig::default();
+        // The 5-scale search and fresh training patches (as the CNN presets), so every
+        // scale and both training paths go through the network.
+        cfg.detection.scale_estimator = ScaleEstimator::Search;
+        cfg.learning.training_sample = TrainingSample::Fresh;
         cfg.features.kind = FeatureKind::Cnn;
         cfg.features.cnn = Some(CnnConfig {
             input_size_policy: InputSizePolicy::Patch,

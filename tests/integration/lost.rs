@@ -99,27 +99,16 @@ fn assert_look_alike_not_taken(cfg: TrackerConfig, what: &str) {
     assert!(o.bbox.center().distance(&truth.center()) < 5.0, "{what}");
 }
 
-/// The fast mode (config/bevt_fast.yaml): colour names, scale filter, shifted sample,
-/// elementwise penalty.
-fn fast() -> TrackerConfig {
-    use bevt_core::config::{ScaleEstimator, TrainingSample};
-    use bevt_core::filter::admm::PenaltyKind;
-    let mut cfg = TrackerConfig::default();
-    cfg.features.colornames = true;
-    cfg.detection.scale_estimator = ScaleEstimator::Filter;
-    cfg.learning.training_sample = TrainingSample::Shifted;
-    cfg.admm.penalty = PenaltyKind::Elementwise;
-    cfg
-}
-
 /// Stated behaviour: a look-alike of the target's size, rim and colours but another
 /// texture, shown while the target is hidden, is **not taken**: the track stays lost while
 /// only the look-alike is visible and is re-acquired on the real target when it returns.
-/// With HOG + gray (the default) and with the fast mode's colour names.
+/// With the default features (colour names) and with HOG + gray alone.
 #[test]
 fn look_alike_shown_while_hidden_is_not_taken() {
     assert_look_alike_not_taken(TrackerConfig::default(), "default");
-    assert_look_alike_not_taken(fast(), "fast mode");
+    let mut hog = TrackerConfig::default();
+    hog.features.colornames = false;
+    assert_look_alike_not_taken(hog, "without colour names");
 }
 
 /// Why `redetection.reacquire_relative` exists: with colour names the look-alike (same
@@ -127,7 +116,7 @@ fn look_alike_shown_while_hidden_is_not_taken() {
 /// (~0.6 against the target's ~0.9), so without the relative bound it is taken.
 #[test]
 fn without_the_relative_bound_the_look_alike_is_taken() {
-    let mut cfg = fast();
+    let mut cfg = TrackerConfig::default();
     cfg.redetection.reacquire_relative = 0.0;
     let seq = with_look_alike();
     let r = track_synthetic(&seq, cfg, seq.truth(0));

@@ -167,7 +167,7 @@ fn consensus_drops_when_the_target_disappears() {
         .all(|o| o.consensus > 0.0 && o.consensus <= 1.0));
 }
 
-/// Every fast-mode addition on top of [`reference`]: `config/bevt_fast.yaml`.
+/// Every fast-mode addition on top of [`reference`]: the default (`config/bevt.yaml`).
 fn variants_all(c: &mut TrackerConfig) {
     use bevt_core::config::{ScaleEstimator, TrainingSample};
     use bevt_core::filter::admm::PenaltyKind;
@@ -201,7 +201,7 @@ fn each_fast_mode_option_alone_and_together_tracks_a_scaling_target() {
         ("elementwise penalty", |c| {
             c.admm.penalty = PenaltyKind::Elementwise
         }),
-        ("all together (config/bevt_fast.yaml)", variants_all),
+        ("all together (the default)", variants_all),
     ];
     for (name, set) in variants {
         let mut cfg = reference();
