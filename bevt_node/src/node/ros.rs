@@ -654,10 +654,11 @@ mod tests {
         s.namespace = "/drone".into();
         let d = ros_name(&s, names::DETECTIONS).unwrap();
         assert_eq!(d.to_dds_name("rt", &node, ""), "rt/drone/detections");
+        // The compressed input follows the remapped raw topic (image_transport).
         let c = ros_name(&s, names::IMAGE_COMPRESSED).unwrap();
         assert_eq!(
             c.to_dds_name("rt", &node, ""),
-            "rt/drone/image_raw/compressed"
+            "rt/camera/color/image_raw/compressed"
         );
         s.remaps.push(("detections".into(), "bad name!".into()));
         assert!(ros_name(&s, names::DETECTIONS).is_err());
