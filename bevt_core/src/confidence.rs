@@ -140,6 +140,12 @@ impl ConfidenceModel {
         }
     }
 
+    /// Replaces the parameters, keeping the running reference level and the initial peak
+    /// (for [`crate::BevtTracker::retune`]).
+    pub fn set_params(&mut self, params: ConfidenceParams) {
+        self.params = params;
+    }
+
     /// True while the gate's reference is still the plain mean of the first frames.
     pub fn warming_up(&self) -> bool {
         self.seen < self.params.warmup_frames

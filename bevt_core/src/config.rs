@@ -424,6 +424,112 @@ impl Default for TrackerConfig {
     }
 }
 
+/// The keys a running tracker takes at once ([`crate::BevtTracker::retune`]): thresholds,
+/// rates and per-frame budgets, read on every frame. Every other key shapes what is built
+/// at initialisation (window, features, filter, scales, buffers) and takes effect only for
+/// a new tracker.
+pub const LIVE_KEYS: &[&str] = &[
+    "learning.rate",
+    "learning.reinforced_rate",
+    "verification.enabled",
+    "verification.threshold_low",
+    "verification.threshold_high",
+    "verification.response_model_rate",
+    "verification.gate_low",
+    "verification.gate_high",
+    "verification.max_consecutive_skips",
+    "confidence.half_score",
+    "confidence.reference_rate",
+    "track_state.lost_threshold",
+    "track_state.lost_frames",
+    "redetection.windows_per_frame",
+    "redetection.reacquire_threshold",
+    "redetection.reacquire_frames",
+    "redetection.reacquire_relative",
+    "detection.newton_iterations",
+];
+
+impl TrackerConfig {
+    /// A copy of `self` with the [`LIVE_KEYS`] of `other`: equal to `other` exactly when
+    /// the two differ in live keys only.
+    pub fn with_live_keys_of(&self, other: &TrackerConfig) -> TrackerConfig {
+        let mut c = self.clone();
+        c.learning.rate = other.learning.rate;
+        c.learning.reinforced_rate = other.learning.reinforced_rate;
+        let (v, o) = (&mut c.verification, &other.verification);
+        v.enabled = o.enabled;
+        v.threshold_low = o.threshold_low;
+        v.threshold_high = o.threshold_high;
+        v.response_model_rate = o.response_model_rate;
+        v.gate_low = o.gate_low;
+        v.gate_high = o.gate_high;
+        v.max_consecutive_skips = o.max_consecutive_skips;
+        c.confidence.half_score = other.confidence.half_score;
+        c.confidence.reference_rate = other.confidence.reference_rate;
+        c.track_state = other.track_state.clone();
+        let (r, o) = (&mut c.redetection, &other.redetection);
+        r.windows_per_frame = o.windows_per_frame;
+        r.reacquire_threshold = o.reacquire_threshold;
+        r.reacquire_frames = o.reacquire_frames;
+        r.reacquire_relative = o.reacquire_relative;
+        c.detection.newton_iterations = other.detection.newton_iterations;
+        c
+    }
+}
+
+/// The documentation of every configuration key, by dotted name (`window.padding`): the
+/// doc comment of its field in this file (for `ros2 param describe` on the node). Keys of
+/// sections defined elsewhere (`features.cnn`) get the section's comment.
+pub fn key_docs() -> Vec<(String, String)> {
+    const SOURCE: &str = include_str!("config.rs");
+    /// A field: name, type, doc.
+    type Field<'a> = (&'a str, &'a str, String);
+    // struct name -> fields, in file order.
+    let mut structs: Vec<(&str, Vec<Field<'_>>)> = Vec::new();
+    let mut current: Option<usize> = None;
+    let mut doc: Vec<&str> = Vec::new();
+    for line in SOURCE.lines() {
+        let t = line.trim();
+        if let Some(name) = t
+            .strip_prefix("pub struct ")
+            .and_then(|r| r.strip_suffix(" {"))
+        {
+            structs.push((name, Vec::new()));
+            current = Some(structs.len() - 1);
+            doc.clear();
+        } else if line.starts_with('}') {
+            current = None;
+            doc.clear();
+        } else if let Some(d) = t.strip_prefix("///") {
+            doc.push(d.trim());
+        } else if t.starts_with("#[") {
+            // attributes between a doc comment and its field
+        } else if let (Some(i), Some((field, ty))) = (
+            current,
+            t.strip_prefix("pub ").and_then(|r| r.split_once(':')),
+        ) {
+            let ty = ty.trim().trim_end_matches(',');
+            structs[i].1.push((field, ty, doc.join(" ")));
+            doc.clear();
+        } else {
+            doc.clear();
+        }
+    }
+    let fields_of = |name: &str| structs.iter().find(|(n, _)| *n == name).map(|(_, f)| f);
+    let mut out = Vec::new();
+    for (section, ty, doc) in fields_of("TrackerConfig").into_iter().flatten() {
+        match fields_of(ty) {
+            Some(fields) => {
+                for (field, _, d) in fields {
+                    out.push((format!("{section}.{field}"), d.clone()));
+                }
+            }
+            None => out.push((section.to_string(), doc.clone())),
+        }
+    }
+    out
+}
+
 /// A validated configuration: what the tracker is built from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrackerSpec {

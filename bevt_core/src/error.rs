@@ -19,6 +19,10 @@ pub enum ConfigError {
     /// Two fields contradict each other.
     #[error("config fields are inconsistent: {0}")]
     Inconsistent(String),
+    /// A running tracker was given a configuration that differs in a field which only
+    /// takes effect when a tracker is built (see [`crate::config::LIVE_KEYS`]).
+    #[error("config field(s) {0} cannot change while tracking (they shape the tracker built at initialisation)")]
+    NotLive(String),
 }
 
 /// An error from [`crate::Tracker::init`] or [`crate::Tracker::update`]: bad input.

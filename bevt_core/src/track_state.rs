@@ -131,6 +131,12 @@ impl StateMachine {
         }
     }
 
+    /// Replaces the thresholds, keeping the state and its counters (for
+    /// [`crate::BevtTracker::retune`]).
+    pub fn set_params(&mut self, params: StateParams) {
+        self.params = params;
+    }
+
     /// The current state.
     pub fn state(&self) -> TrackState {
         self.state

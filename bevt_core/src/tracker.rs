@@ -6,7 +6,8 @@
 mod lost;
 
 use crate::confidence::{psr, ConfidenceModel, Measures};
-use crate::config::{FeatureKind, ScaleEstimator, TrackerSpec, TrainingSample};
+use crate::config::{FeatureKind, ScaleEstimator, TrackerConfig, TrackerSpec, TrainingSample};
+use crate::error::ConfigError;
 use crate::error::TrackError;
 use crate::features::{FeatureExtractor, FeatureMap, Hog};
 use crate::fft::{fftshift, Fft2};
@@ -337,6 +338,42 @@ impl State {
     }
 }
 
+/// The top-level sections in which `a` and `b` differ, e.g. `window, features`.
+fn differing_sections(a: &TrackerConfig, b: &TrackerConfig) -> String {
+    let mut out = Vec::new();
+    if a.features != b.features {
+        out.push("features");
+    }
+    if a.window != b.window {
+        out.push("window");
+    }
+    if a.admm != b.admm {
+        out.push("admm");
+    }
+    if a.detection != b.detection {
+        out.push("detection");
+    }
+    if a.scale_filter != b.scale_filter {
+        out.push("scale_filter");
+    }
+    if a.learning != b.learning {
+        out.push("learning");
+    }
+    if a.verification != b.verification {
+        out.push("verification");
+    }
+    if a.confidence != b.confidence {
+        out.push("confidence");
+    }
+    if a.redetection != b.redetection {
+        out.push("redetection");
+    }
+    if a.threads != b.threads {
+        out.push("threads");
+    }
+    out.join(", ")
+}
+
 /// The BEVT tracker.
 pub struct BevtTracker {
     spec: TrackerSpec,
@@ -417,6 +454,28 @@ impl BevtTracker {
     /// The specification the tracker was built with.
     pub fn spec(&self) -> &TrackerSpec {
         &self.spec
+    }
+
+    /// Takes a new specification that differs from the current one in
+    /// [`crate::config::LIVE_KEYS`] only, at once: the running track keeps its model,
+    /// state and counters and uses the new thresholds and rates from the next frame.
+    ///
+    /// # Errors
+    /// [`ConfigError::NotLive`] naming the sections that differ in other keys; the
+    /// tracker is unchanged.
+    pub fn retune(&mut self, spec: TrackerSpec) -> Result<(), ConfigError> {
+        let cur = &self.spec.config;
+        if cur.with_live_keys_of(&spec.config) != spec.config {
+            let probe = spec.config.with_live_keys_of(cur);
+            return Err(ConfigError::NotLive(differing_sections(cur, &probe)));
+        }
+        if let Some(st) = self.state.as_mut() {
+            st.gate.set_params(spec.gate);
+            st.states.set_params(spec.states);
+            st.confidence.set_params(spec.confidence);
+        }
+        self.spec = spec;
+        Ok(())
     }
 
     /// The window geometry of the current track.
@@ -850,5 +909,64 @@ impl Tracker for BevtTracker {
 
     fn is_initialized(&self) -> bool {
         self.state.is_some()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::synth::SynthParams;
+    use crate::Tracker;
+
+    fn started(seq: &SynthParams, cfg: &TrackerConfig) -> BevtTracker {
+        let mut t = BevtTracker::new(cfg.validate().unwrap());
+        let f0 = seq.frame(0);
+        let frame = Frame::packed(&f0.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+        t.init(&frame, f0.truth).unwrap();
+        t
+    }
+
+    fn track(t: &mut BevtTracker, seq: &SynthParams, frames: std::ops::Range<usize>) -> TrackState {
+        let mut state = TrackState::Tracking;
+        for i in frames {
+            let f = seq.frame(i);
+            let frame = Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+            state = t.update(&frame).unwrap().state;
+        }
+        state
+    }
+
+    #[test]
+    fn retune_applies_live_keys_to_the_running_track_at_once() {
+        let seq = SynthParams::default();
+        let cfg = TrackerConfig::default();
+        let mut t = started(&seq, &cfg);
+        assert_eq!(track(&mut t, &seq, 1..15), TrackState::Tracking);
+        // A confidence threshold no frame reaches: the same track turns uncertain, then
+        // lost after `lost_frames` frames, with no new initialisation.
+        let mut strict = cfg.clone();
+        strict.track_state.lost_threshold = 1.0;
+        strict.track_state.lost_frames = 3;
+        t.retune(strict.validate().unwrap()).unwrap();
+        assert_eq!(t.spec().config.track_state.lost_frames, 3);
+        assert_eq!(track(&mut t, &seq, 15..17), TrackState::Uncertain);
+        assert_eq!(track(&mut t, &seq, 17..18), TrackState::Lost);
+    }
+
+    #[test]
+    fn retune_refuses_keys_that_shape_the_tracker_and_changes_nothing() {
+        let seq = SynthParams::default();
+        let cfg = TrackerConfig::default();
+        let mut t = started(&seq, &cfg);
+        let mut other = cfg.clone();
+        other.window.padding = 1.5;
+        other.learning.rate = 0.02;
+        let e = t.retune(other.validate().unwrap()).unwrap_err();
+        assert!(
+            matches!(&e, ConfigError::NotLive(s) if s == "window"),
+            "{e}"
+        );
+        assert_eq!(t.spec().config, cfg, "nothing applied");
+        assert_eq!(track(&mut t, &seq, 1..10), TrackState::Tracking);
     }
 }

@@ -170,6 +170,12 @@ impl LearningGate {
         }
     }
 
+    /// Replaces the thresholds and rates, keeping the count of skipped frames (for
+    /// [`crate::BevtTracker::retune`]).
+    pub fn set_params(&mut self, params: GateParams) {
+        self.params = params;
+    }
+
     /// Frames skipped in a row so far.
     pub fn skipped_in_a_row(&self) -> usize {
         self.skipped_in_a_row
