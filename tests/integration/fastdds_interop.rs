@@ -53,7 +53,7 @@ fn a_fast_dds_peer_with_the_rmw_fastrtps_mapping_drives_the_node() {
     let meta: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("meta.json")).unwrap()).unwrap();
     // A domain none of the other tests of this process uses (node_limits 1..18, the DDS
-    // hardening tests 20..94, node.rs 100..219, interop 200..229, ros_tools 230..232).
+    // hardening tests 20..94, node.rs 100..219, interop 200..229, ros_tools 19, 220, 221).
     let domain = 95 + (std::process::id() % 5) as u16;
     // The node's default settings: Enhanced (Fast DDS) service mapping.
     let settings = RosSettings {

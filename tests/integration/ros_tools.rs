@@ -14,9 +14,15 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// A domain none of the other tests of this process uses (node_limits 1..18, the DDS
-/// hardening tests 20..94, fastdds_interop 95..99, node.rs 100..219, interop 200..229).
+/// hardening tests 20..94, fastdds_interop 95..99, node.rs 100..219, interop 200..229)
+/// and outside the soak benchmark's (224 and up): 19, and 220 or 221.
 fn domain(k: u16) -> u16 {
-    230 + (std::process::id() % 2) as u16 + k
+    let interop = 200 + (std::process::id() % 30) as u16;
+    match k {
+        0 => 19,
+        _ if interop == 220 => 221,
+        _ => 220,
+    }
 }
 
 /// The node in a thread; stopped and joined when dropped.
@@ -136,4 +142,212 @@ fn a_remapped_raw_topic_takes_the_compressed_input_with_it() {
         .is_none(),
         "the node still reads /image_raw/compressed"
     );
+}
+
+/// The Python parameter client (tests/interop/param_peer.py) as a child process: one JSON
+/// command per line in, one JSON answer per line out.
+struct ParamPeer {
+    child: std::process::Child,
+    out: std::io::BufReader<std::process::ChildStdout>,
+}
+
+impl ParamPeer {
+    fn start(domain: u16, node: &str) -> Result<Self, String> {
+        use std::process::{Command, Stdio};
+        let py = crate::interop::python()?;
+        let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("interop/param_peer.py");
+        let mut child = Command::new(py)
+            .arg(script)
+            .arg(domain.to_string())
+            .arg(node)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .map_err(|e| e.to_string())?;
+        let out = std::io::BufReader::new(child.stdout.take().ok_or("no stdout")?);
+        let mut p = Self { child, out };
+        let ready = p.read();
+        assert_eq!(ready["ready"], true, "parameter peer: {ready}");
+        Ok(p)
+    }
+
+    fn read(&mut self) -> serde_json::Value {
+        use std::io::BufRead;
+        let mut line = String::new();
+        self.out.read_line(&mut line).unwrap();
+        assert!(!line.is_empty(), "the parameter peer exited");
+        serde_json::from_str(&line).unwrap()
+    }
+
+    fn ask(&mut self, cmd: serde_json::Value) -> serde_json::Value {
+        use std::io::Write;
+        let stdin = self.child.stdin.as_mut().unwrap();
+        writeln!(stdin, "{cmd}").unwrap();
+        stdin.flush().unwrap();
+        let v = self.read();
+        assert!(v.get("error").is_none(), "{cmd}: {v}");
+        v
+    }
+
+    fn get(&mut self, name: &str) -> serde_json::Value {
+        self.ask(serde_json::json!({"cmd": "get", "names": [name]}))["values"][0].clone()
+    }
+
+    fn set(&mut self, name: &str, value: serde_json::Value) -> (bool, String) {
+        let r = self.ask(serde_json::json!({"cmd": "set", "name": name, "value": value}));
+        (
+            r["successful"].as_bool().unwrap(),
+            r["reason"].as_str().unwrap().to_string(),
+        )
+    }
+}
+
+impl Drop for ParamPeer {
+    fn drop(&mut self) {
+        drop(self.child.stdin.take());
+        let _ = self.child.wait();
+    }
+}
+
+#[test]
+fn ros2_param_round_trip_with_an_independent_cyclone_dds_client() {
+    use bevt_msgs::bevt::TrackStatus;
+    use bevt_node::node::sim::spawn_camera;
+    let settings = RosSettings {
+        domain_id: domain(1),
+        // The peer speaks rmw_cyclonedds' service mapping.
+        service_mapping: ros2_client::ServiceMapping::Cyclone,
+        ..RosSettings::default()
+    };
+    if let Err(e) = crate::interop::python() {
+        println!("SKIPPED ros2_param_round_trip_with_an_independent_cyclone_dds_client: no Python environment ({e})");
+        return;
+    }
+    let node = start(&settings);
+    let mut peer = ParamPeer::start(settings.domain_id, "/bevt_node").unwrap();
+    let seq = SynthParams {
+        frames: 4000,
+        ..SynthParams::default()
+    };
+    // Tracking, whether or not the frame was learned.
+    let tracking = |s: &TrackStatus| {
+        s.state == TrackStatus::STATE_TRACKING || s.state == TrackStatus::STATE_LOW_CONSENSUS
+    };
+    let (camera, truth) = spawn_camera(&settings, seq, 20.0, node.stop.clone()).unwrap();
+    let gs = GroundStation::new(&settings).unwrap();
+
+    // ros2 param list / describe / get
+    let names = peer.ask(serde_json::json!({"cmd": "list"}));
+    let names: Vec<&str> = names["names"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    for n in [
+        "reinit_rate_hz",
+        "debug_image_rate_hz",
+        "domain_id",
+        "use_sim_time",
+        "tracker.learning.rate",
+        "tracker.window.padding",
+    ] {
+        assert!(names.contains(&n), "{n} not listed: {names:?}");
+    }
+    let d = peer.ask(serde_json::json!({"cmd": "describe",
+        "names": ["tracker.track_state.lost_threshold", "tracker.window.padding"]}));
+    let (live, fixed) = (&d["descriptors"][0], &d["descriptors"][1]);
+    println!("describe: {live}\n          {fixed}");
+    assert!(live["description"].as_str().unwrap().len() > 20, "{live}");
+    assert_eq!(live["read_only"], false);
+    assert_eq!(live["floating_point_range"][0][0], 0.0);
+    assert_eq!(live["floating_point_range"][0][1], 1.0);
+    assert_eq!(fixed["read_only"], true);
+    assert_eq!(peer.get("tracker.track_state.lost_threshold"), 0.3);
+
+    // Start a track on the newest frame the camera published.
+    let end = Instant::now() + Duration::from_secs(20);
+    let track_id = loop {
+        let newest = truth
+            .lock()
+            .unwrap()
+            .iter()
+            .next_back()
+            .map(|(k, b)| (*k, *b));
+        if let Some((stamp, b)) = newest {
+            let req = bevt_node::convert::reinit_request(
+                b,
+                bevt_msgs::builtin_interfaces::Time::from_nanos(stamp),
+                "",
+            );
+            if gs
+                .reinit(&req, Duration::from_secs(3))
+                .is_some_and(|r| r.success)
+            {
+                let s = wait_status(&gs, Duration::from_secs(5), tracking)
+                    .expect("tracking after reinit");
+                break s.track_id;
+            }
+        }
+        assert!(Instant::now() < end, "the node never started tracking");
+        std::thread::sleep(Duration::from_millis(200));
+    };
+
+    // A parameter that shapes the tracker: refused with the reason, old value kept, the
+    // node tracking on with the same track.
+    let (ok, reason) = peer.set("tracker.window.padding", serde_json::json!(1.5));
+    println!("set tracker.window.padding 1.5: {ok} {reason:?}");
+    assert!(!ok);
+    assert!(reason.contains("read-only while running"), "{reason}");
+    assert_eq!(peer.get("tracker.window.padding"), 1.2);
+    let (ok, reason) = peer.set("tracker.track_state.lost_threshold", serde_json::json!(2.0));
+    println!("set tracker.track_state.lost_threshold 2.0: {ok} {reason:?}");
+    assert!(!ok && reason.contains("[0, 1]"), "{reason}");
+    let (ok, reason) = peer.set("reinit_rate_hz", serde_json::json!("fast"));
+    assert!(!ok && reason.contains("wrong type"), "{reason}");
+    gs.take_status();
+    let s = wait_status(&gs, Duration::from_secs(5), tracking)
+        .expect("still tracking after the refused sets");
+    assert_eq!(s.track_id, track_id);
+
+    // A live parameter: accepted, visible in get, in effect on the running track (a
+    // confidence threshold no frame reaches makes the same track uncertain at once).
+    let (ok, reason) = peer.set("tracker.track_state.lost_threshold", serde_json::json!(1.0));
+    assert!(ok, "{reason}");
+    assert_eq!(peer.get("tracker.track_state.lost_threshold"), 1.0);
+    gs.take_status();
+    let s = wait_status(&gs, Duration::from_secs(5), |s| {
+        s.state == TrackStatus::STATE_UNCERTAIN || s.state == TrackStatus::STATE_LOST
+    })
+    .expect("the new threshold did not take effect");
+    assert_eq!(s.track_id, track_id, "the same track, not a new one");
+    // An integer for a double, as `ros2 param set bevt_node reinit_rate_hz 2` sends.
+    let (ok, reason) = peer.set("reinit_rate_hz", serde_json::json!(2));
+    assert!(ok, "{reason}");
+    assert_eq!(peer.get("reinit_rate_hz"), 2.0);
+
+    // /parameter_events: the two accepted changes, none of the refused ones.
+    let ev = peer.ask(serde_json::json!({"cmd": "events"}));
+    println!("events: {ev}");
+    let changed: Vec<(String, serde_json::Value)> = ev["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["node"] == "/bevt_node")
+        .flat_map(|e| e["changed"].as_array().unwrap().clone())
+        .map(|c| (c[0].as_str().unwrap().to_string(), c[1].clone()))
+        .collect();
+    assert_eq!(
+        changed,
+        vec![
+            (
+                "tracker.track_state.lost_threshold".to_string(),
+                serde_json::json!(1.0)
+            ),
+            ("reinit_rate_hz".to_string(), serde_json::json!(2.0)),
+        ]
+    );
+    drop(node);
+    let _ = camera.join();
 }

@@ -302,6 +302,44 @@ impl NodeCore {
         }
     }
 
+    /// The node settings in use.
+    pub fn settings(&self) -> &NodeSettings {
+        &self.settings
+    }
+
+    /// The tracker specification in use (for new tracks too).
+    pub fn spec(&self) -> &TrackerSpec {
+        &self.spec
+    }
+
+    /// Takes the settings that may change while running ([`crate::node::param_services`]
+    /// says which): `class_id`, `reinit_max_fast_forward`, `reinit_rate_hz`,
+    /// `reinit_burst`, `stale_timeout`. The others (buffer, image limits, name) keep their
+    /// start-up values. A new rate or burst starts a full bucket.
+    pub fn set_live_settings(&mut self, s: &NodeSettings) {
+        if s.reinit_rate_hz != self.settings.reinit_rate_hz
+            || s.reinit_burst != self.settings.reinit_burst
+        {
+            self.gate = ReinitGate::new(s.reinit_rate_hz, s.reinit_burst);
+        }
+        self.settings.class_id.clone_from(&s.class_id);
+        self.settings.reinit_max_fast_forward = s.reinit_max_fast_forward;
+        self.settings.reinit_rate_hz = s.reinit_rate_hz;
+        self.settings.reinit_burst = s.reinit_burst;
+        self.settings.stale_timeout = s.stale_timeout;
+    }
+
+    /// Takes a tracker specification that differs in `bevt_core::config::LIVE_KEYS` only:
+    /// the running track uses it from the next frame, and new tracks are built with it.
+    ///
+    /// # Errors
+    /// [`bevt_core::ConfigError::NotLive`] when other keys differ; nothing changes.
+    pub fn retune(&mut self, spec: TrackerSpec) -> Result<(), bevt_core::ConfigError> {
+        self.tracker.retune(spec.clone())?;
+        self.spec = spec;
+        Ok(())
+    }
+
     /// Adds frames the transport skipped because a newer one had arrived.
     pub fn add_dropped(&mut self, n: u32) {
         self.frames_dropped = self.frames_dropped.saturating_add(n);

@@ -3,5 +3,6 @@
 
 pub mod app;
 pub mod node_params;
+pub mod param_services;
 pub mod ros;
 pub mod sim;

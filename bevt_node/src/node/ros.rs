@@ -12,6 +12,7 @@
 //! serves at most one admitted request, so requests never starve the camera.
 
 use crate::node::app::{CameraMsg, FrameOutputs, NodeCore};
+use crate::node::param_services::{Change, NodeParams, ParamServers};
 use bevt_msgs::bevt::{ReinitRequest, ReinitResponse, TrackStatus};
 use bevt_msgs::diagnostic_msgs::DiagnosticArray;
 use bevt_msgs::sensor_msgs::{CompressedImage, Image};
@@ -277,10 +278,26 @@ struct Endpoints {
     pub_det: Publisher<Detection2DArray>,
     pub_status: Publisher<TrackStatus>,
     pub_diag: Publisher<DiagnosticArray>,
-    /// Present when `debug_image_rate_hz > 0`.
+    /// Present once `debug_image_rate_hz` has been > 0 (at start-up or set while running).
     pub_debug: Option<Publisher<Image>>,
     srv_reinit: Server<ReinitRequest, ReinitResponse>,
     srv_stop: Server<TriggerRequest, TriggerResponse>,
+    /// The `rcl_interfaces` parameter services and `/parameter_events`.
+    params: ParamServers,
+}
+
+/// The `debug_image` publisher.
+fn debug_publisher(node: &mut Node, settings: &RosSettings) -> Result<Publisher<Image>, RosError> {
+    let cq = camera_qos();
+    let t = node
+        .create_topic(
+            &ros_name(settings, names::DEBUG_IMAGE)?,
+            type_of::<Image>(),
+            &cq,
+        )
+        .map_err(create_err("debug image topic"))?;
+    node.create_publisher::<Image>(&t, Some(cq))
+        .map_err(create_err("debug image publisher"))
 }
 
 /// The raw and compressed camera subscriptions, handed to the reception thread.
@@ -295,7 +312,14 @@ fn create_endpoints(settings: &RosSettings) -> Result<(Endpoints, CameraSubscrip
     let node_name = NodeName::new(&settings.namespace, &settings.node_name)
         .map_err(|e| RosError::Name(settings.node_name.clone(), format!("{e:?}")))?;
     let mut node: Node = ctx
-        .new_node(node_name, NodeOptions::new().enable_rosout(true))
+        .new_node(
+            node_name,
+            // The parameter services are the node's own (ParamServers): ros2-client's
+            // need its spinner, use the Fast DDS mapping only and describe nothing.
+            NodeOptions::new()
+                .enable_rosout(true)
+                .start_parameter_services(false),
+        )
         .map_err(|e| RosError::Create {
             what: "node".into(),
             reason: format!("{e:?}"),
@@ -326,11 +350,7 @@ fn create_endpoints(settings: &RosSettings) -> Result<(Endpoints, CameraSubscrip
     let t_status = topic(&node, names::TRACK_STATUS, type_of::<TrackStatus>(), &oq)?;
     let t_diag = topic(&node, names::DIAGNOSTICS, type_of::<DiagnosticArray>(), &oq)?;
     let pub_debug = if settings.debug_image_rate_hz > 0.0 {
-        let t = topic(&node, names::DEBUG_IMAGE, type_of::<Image>(), &cq)?;
-        Some(
-            node.create_publisher::<Image>(&t, Some(cq.clone()))
-                .map_err(create_err("debug image publisher"))?,
-        )
+        Some(debug_publisher(&mut node, settings)?)
     } else {
         None
     };
@@ -371,6 +391,17 @@ fn create_endpoints(settings: &RosSettings) -> Result<(Endpoints, CameraSubscrip
             sq.clone(),
         )
         .map_err(create_err("stop service"))?;
+    let fqn = format!(
+        "{}/{}",
+        settings.namespace.trim_end_matches('/'),
+        settings.node_name
+    );
+    let params = ParamServers::new(&ctx, &mut node, &fqn, settings.service_mapping, &sq).map_err(
+        |reason| RosError::Create {
+            what: "parameter services".into(),
+            reason,
+        },
+    )?;
     let endpoints = Endpoints {
         node,
         sub_init,
@@ -380,6 +411,7 @@ fn create_endpoints(settings: &RosSettings) -> Result<(Endpoints, CameraSubscrip
         pub_debug,
         srv_reinit,
         srv_stop,
+        params,
     };
     let camera = CameraSubscriptions {
         raw: sub_img,
@@ -439,6 +471,12 @@ struct Worker<'a> {
     next_diag: Instant,
     next_debug: Instant,
     debug_period: Duration,
+    /// `debug_image_rate_hz` now (0 = off).
+    debug_rate_hz: f64,
+    /// `diagnostics_period_s` now.
+    diagnostics_period: Duration,
+    /// The declared parameters and their current values.
+    params: NodeParams,
 }
 
 impl Worker<'_> {
@@ -509,6 +547,44 @@ impl Worker<'_> {
         }
     }
 
+    /// Step 1b: answers the parameter services; accepted changes take effect at once.
+    fn serve_params(&mut self) {
+        let settings = self.settings;
+        let core = &mut self.core;
+        let (diag, period, rate) = (
+            &mut self.diagnostics_period,
+            &mut self.debug_period,
+            &mut self.debug_rate_hz,
+        );
+        let (node, pub_debug) = (&mut self.ep.node, &mut self.ep.pub_debug);
+        let lines = self.ep.params.serve(&mut self.params, |change| {
+            match change {
+                Change::Node(n) => core.set_live_settings(n),
+                Change::Tracker(spec) => {
+                    core.retune((**spec).clone()).map_err(|e| e.to_string())?
+                }
+                Change::DiagnosticsPeriod(p) => *diag = *p,
+                Change::DebugImageRate(r) => {
+                    if *r > 0.0 && pub_debug.is_none() {
+                        *pub_debug =
+                            Some(debug_publisher(node, settings).map_err(|e| e.to_string())?);
+                    }
+                    *rate = *r;
+                    *period = Duration::try_from_secs_f64(1.0 / r).unwrap_or(MAX_PERIOD);
+                }
+            }
+            Ok(())
+        });
+        for (ok, l) in lines {
+            let level = if ok {
+                ros2_client::log::LogLevel::Info
+            } else {
+                ros2_client::log::LogLevel::Warn
+            };
+            self.log(level, &l);
+        }
+    }
+
     /// Step 2: tracks the newest camera frame, if one arrived within [`WORKER_WAIT`].
     fn track_newest(&mut self, slot: &Slot, observe: &mut impl FnMut(&FrameOutputs)) {
         match slot.take(WORKER_WAIT) {
@@ -562,7 +638,7 @@ impl Worker<'_> {
     /// Step 4: the timers: the debug image, then status, diagnostics and the summary of
     /// refused requests once per diagnostics period.
     fn run_timers(&mut self, now: Instant) {
-        if let Some(p) = &self.ep.pub_debug {
+        if let (Some(p), true) = (&self.ep.pub_debug, self.debug_rate_hz > 0.0) {
             if now >= self.next_debug {
                 if let Some(img) = self.core.debug_image() {
                     self.next_debug = later(now, self.debug_period);
@@ -571,7 +647,7 @@ impl Worker<'_> {
             }
         }
         if now >= self.next_diag {
-            self.next_diag = later(now, self.settings.diagnostics_period);
+            self.next_diag = later(now, self.diagnostics_period);
             if self.refused > 0 {
                 self.log(
                     ros2_client::log::LogLevel::Warn,
@@ -604,7 +680,11 @@ pub fn run(
     let debug_period =
         Duration::try_from_secs_f64(1.0 / settings.debug_image_rate_hz).unwrap_or(MAX_PERIOD);
     let slot = spawn_reception(camera, shutdown.clone())?;
+    let params = NodeParams::new(settings, core.settings(), &core.spec().config);
     let mut w = Worker {
+        params,
+        debug_rate_hz: settings.debug_image_rate_hz,
+        diagnostics_period: settings.diagnostics_period,
         core,
         ep,
         settings,
@@ -621,6 +701,7 @@ pub fn run(
     );
     while !shutdown.load(Ordering::Relaxed) {
         w.read_requests();
+        w.serve_params();
         w.track_newest(&slot, &mut observe);
         w.serve_one_request(&mut observe);
         w.run_timers(Instant::now());
