@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Module evaluation on the dev set: the authors' reference (config/bevt_reference.yaml), each
 # fast-mode addition alone on top of it, all of them together (the default config/bevt.yaml, rows
-# "default*"), then the fast mode with one module changed back at a time; plus the reference's own modules
+# "default*"), then the default with one module changed back at a time, temporal regularisation
+# (admm.temporal) and scale-sample padding on top of it; plus the reference's own modules
 # (verification, enhanced background learning, beta, grayscale). Accuracy is deterministic;
 # fps is indicative (run on a quiet machine). Prints a Markdown table with the mean over the
 # 7 sequences and over the 6 without the bimodal wakeboard4.
@@ -33,6 +34,12 @@ run default_penalty_matrix "${fast[@]}" --set admm.penalty=matrix
 run default_penalty_none "${fast[@]}" --set admm.penalty=none
 run default_elementwise_kappa3 "${fast[@]}" --set admm.spatial_weight=3
 run default_elementwise_kappa30 "${fast[@]}" --set admm.spatial_weight=30
+run default_temporal_0.5 "${fast[@]}" --set admm.temporal=0.5
+run default_temporal_1 "${fast[@]}" --set admm.temporal=1
+run default_temporal_2 "${fast[@]}" --set admm.temporal=2
+run default_temporal_5 "${fast[@]}" --set admm.temporal=5
+run default_scale_padding_1.5 "${fast[@]}" --set scale_filter.padding=1.5
+run default_scale_padding_2 "${fast[@]}" --set scale_filter.padding=2
 run ref_no_verification "${ref[@]}" --set verification.enabled=false
 run ref_no_ebl_small_window_no_penalty "${ref[@]}" --set admm.penalty=none --set window.search_area_scale=2.0
 run ref_beta_10 "${ref[@]}" --set admm.beta=10
@@ -43,7 +50,9 @@ out = sys.argv[1]
 names = ["reference", "ref+colornames", "ref+scale_filter", "ref+shifted_sample", "ref+elementwise",
          "ref+penalty_none", "default", "default-colornames", "default-scale_filter",
          "default-shifted_sample", "default_penalty_matrix", "default_penalty_none",
-         "default_elementwise_kappa3", "default_elementwise_kappa30", "ref_no_verification",
+         "default_elementwise_kappa3", "default_elementwise_kappa30", "default_temporal_0.5",
+         "default_temporal_1", "default_temporal_2", "default_temporal_5",
+         "default_scale_padding_1.5", "default_scale_padding_2", "ref_no_verification",
          "ref_no_ebl_small_window_no_penalty", "ref_beta_10", "ref_without_gray"]
 print("| variant | P@20 | AUC | P@20 / AUC without wakeboard4 | truck4_1 | wakeboard10 | wakeboard7 | fps pooled |")
 print("|---|---|---|---|---|---|---|---|")

@@ -110,6 +110,9 @@ pub struct AdmmConfig {
     /// κ = 2/T (T = grid cells, ~1/1800): no effect against μ ≥ 1. κ = 100 weighs
     /// the target edge ~64× the first μ (in the spirit of SRDCF/STRCF weights). Unitless.
     pub spatial_weight: f32,
+    /// Weight θ of the temporal regularisation `θ/2‖ĝ − ĝ_prev‖²` (STRCF/AutoTrack; in the
+    /// units of μ; 0 = none, the reference).
+    pub temporal: f32,
     /// Penalty window minimum at the target centre (ref 0.1).
     pub reg_window_min: f32,
     /// Penalty window value at the target edge (ref 0.8).
@@ -126,6 +129,7 @@ impl Default for AdmmConfig {
             lambda: 0.01,
             penalty: PenaltyKind::Elementwise,
             spatial_weight: 10.0,
+            temporal: 0.0,
             reg_window_min: 0.1,
             reg_window_edge: 0.8,
         }
@@ -164,6 +168,8 @@ pub struct ScaleFilterConfig {
     pub sample_side: usize,
     /// HOG cell of the scale samples, pixels (fDSST 4).
     pub cell_size: usize,
+    /// Each scale sample covers the target box times this factor (fDSST 1: the box only).
+    pub padding: f32,
 }
 
 impl Default for ScaleFilterConfig {
@@ -177,6 +183,7 @@ impl Default for ScaleFilterConfig {
             lambda: 0.01,
             sample_side: 24,
             cell_size: 4,
+            padding: 1.0,
         }
     }
 }
@@ -753,6 +760,12 @@ impl TrackerConfig {
             a.spatial_weight,
             "[0, 1e6]",
         )?;
+        check(
+            a.temporal.is_finite() && a.temporal >= 0.0 && a.temporal <= MAX_ADMM_VALUE,
+            "admm.temporal",
+            a.temporal,
+            "[0, 1e6]",
+        )?;
         let d = &self.detection;
         check(
             d.number_of_scales >= 1 && d.number_of_scales <= 33,
@@ -827,6 +840,12 @@ impl TrackerConfig {
             "scale_filter.sample_side",
             sf.sample_side,
             "2·scale_filter.cell_size..=256 pixels",
+        )?;
+        check(
+            sf.padding.is_finite() && (1.0..=4.0).contains(&sf.padding),
+            "scale_filter.padding",
+            sf.padding,
+            "[1, 4]",
         )?;
         let l = &self.learning;
         check(
@@ -979,6 +998,7 @@ impl TrackerConfig {
                 lambda: a.lambda,
                 penalty: a.penalty,
                 spatial_weight: a.spatial_weight,
+                temporal: a.temporal,
             },
             scale_filter: ScaleFilterParams {
                 scales: sf.scales,
@@ -989,6 +1009,7 @@ impl TrackerConfig {
                 lambda: sf.lambda,
                 sample_side: sf.sample_side,
                 cell: sf.cell_size,
+                padding: sf.padding,
             },
             verify: VerifyParams {
                 norm: v.norm,
@@ -1053,12 +1074,15 @@ mod tests {
                 (|c: &mut TrackerConfig| c.admm.spatial_weight = -1.0) as fn(&mut TrackerConfig),
                 "admm.spatial_weight",
             ),
+            (|c| c.admm.temporal = f32::NAN, "admm.temporal"),
+            (|c| c.admm.temporal = -1.0, "admm.temporal"),
             (|c| c.scale_filter.scales = 1, "scale_filter.scales"),
             (
                 |c| c.scale_filter.interpolated_scales = 5,
                 "scale_filter.interpolated_scales",
             ),
             (|c| c.scale_filter.step = 1.0, "scale_filter.step"),
+            (|c| c.scale_filter.padding = 0.5, "scale_filter.padding"),
             (
                 |c| c.scale_filter.learning_rate = 0.0,
                 "scale_filter.learning_rate",

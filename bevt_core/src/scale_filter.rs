@@ -51,6 +51,8 @@ pub struct ScaleFilterParams {
     pub sample_side: usize,
     /// HOG cell of the scale samples, pixels (fDSST 4).
     pub cell: usize,
+    /// Sample extent as a multiple of the target box (fDSST 1).
+    pub padding: f32,
 }
 
 /// Smallest norm of a basis vector before it is treated as linearly dependent.
@@ -65,6 +67,7 @@ pub struct ScaleFilter {
     lambda: f32,
     step: f32,
     cell: usize,
+    padding: f32,
     /// Relative sample scales `a^{e_k}`, `k = 0..n`.
     sample_factors: Vec<f32>,
     /// Relative interpolated scales, `j = 0..m`.
@@ -180,6 +183,7 @@ impl ScaleFilter {
             lambda: p.lambda,
             step: p.step,
             cell,
+            padding: p.padding,
             sample_factors,
             interp_factors,
             window: hann(n),
@@ -227,8 +231,8 @@ impl ScaleFilter {
         let lo = self.sample_factors.first().copied().unwrap_or(1.0);
         let hi = self.sample_factors.last().copied().unwrap_or(1.0);
         let (w, h) = (
-            size.w.max(size.h / MAX_SAMPLE_ASPECT),
-            size.h.max(size.w / MAX_SAMPLE_ASPECT),
+            size.w.max(size.h / MAX_SAMPLE_ASPECT) * self.padding,
+            size.h.max(size.w / MAX_SAMPLE_ASPECT) * self.padding,
         );
         self.sampler
             .prepare(frame, center, w.min(h) * lo, w.max(h) * hi, out_side);
@@ -412,6 +416,7 @@ mod tests {
             lambda: 0.01,
             sample_side: 24,
             cell: 4,
+            padding: 1.0,
         }
     }
 

@@ -5,6 +5,12 @@
 //! D×D inverse) and a spatial variable `h` that carries the penalty and the crop `B` to
 //! the target-sized support. The learned filter is `ĝ`.
 //!
+//! Optional temporal regularisation (STRCF, Li et al. CVPR 2018; AutoTrack, Li et al. CVPR
+//! 2020): `+ θ/2 Σ_d ‖ĝ_d − ĝ_prev,d‖²` (in the units of μ, as theirs), `ĝ_prev` the filter
+//! the previous training produced. It only changes the `ĝ` subproblem: `μ` becomes `μ + θ`
+//! and `ĥ` becomes `(μĥ + θĝ_prev)/(μ + θ)`. The first training of a track has no previous
+//! filter and no temporal term.
+//!
 //! All spectra are half spectra in the layout of [`crate::fft`]; `T = H·W`.
 
 use crate::fft::Fft2;
@@ -75,6 +81,8 @@ pub struct AdmmParams {
     pub penalty: PenaltyKind,
     /// Magnitude κ of the `elementwise` penalty (unitless; see [`PenaltyKind::Elementwise`]).
     pub spatial_weight: f32,
+    /// Weight θ of the temporal term `θ/2‖ĝ − ĝ_prev‖²` (0 = none; units of μ).
+    pub temporal: f32,
 }
 
 impl AdmmParams {
@@ -119,6 +127,13 @@ pub struct AdmmSolver {
     tmp_f: Vec<Complex32>,
     spat: Vec<f32>,
     spat2: Vec<f32>,
+    temporal: f32,
+    /// The previous training's filter, when `temporal > 0` (empty otherwise).
+    g_prev: Vec<Complex32>,
+    /// `(μĥ + θĝ_prev)/(μ + θ)`: what the `ĝ` step pulls towards.
+    pull: Vec<Complex32>,
+    /// A previous filter exists (the track has been trained before).
+    primed: bool,
 }
 
 impl AdmmSolver {
@@ -204,6 +219,18 @@ impl AdmmSolver {
             tmp_f: vec![Complex32::default(); bins],
             spat: vec![0.0; grid.len()],
             spat2: vec![0.0; grid.len()],
+            temporal: params.temporal,
+            g_prev: if params.temporal > 0.0 {
+                vec![Complex32::default(); n]
+            } else {
+                Vec::new()
+            },
+            pull: if params.temporal > 0.0 {
+                vec![Complex32::default(); n]
+            } else {
+                Vec::new()
+            },
+            primed: false,
         }
     }
 
@@ -213,7 +240,9 @@ impl AdmmSolver {
     }
 
     /// Trains a filter `g_f` (`channels × bins`) on the appearance model `xf` and label `yf`.
-    /// Starts from `ĝ = ĥ = l̂ = 0`, as the reference does every frame.
+    /// Starts from `ĝ = ĥ = l̂ = 0`, as the reference does every frame. With a temporal
+    /// weight, the filter `g_f` holds on entry (the previous training's, or one the caller
+    /// restored) is the `ĝ_prev` it is pulled towards.
     pub fn train(
         &mut self,
         fft: &mut Fft2,
@@ -235,6 +264,13 @@ impl AdmmSolver {
     ) {
         let (bins, d) = (self.bins, self.channels);
         let t = self.grid.len() as f32;
+        let theta = if self.temporal > 0.0 && self.primed {
+            self.g_prev.copy_from_slice(g_f);
+            self.temporal
+        } else {
+            0.0
+        };
+        self.primed = true;
         self.h_f.iter_mut().for_each(|v| *v = Complex32::default());
         self.l_f.iter_mut().for_each(|v| *v = Complex32::default());
         g_f.iter_mut().for_each(|v| *v = Complex32::default());
@@ -247,7 +283,18 @@ impl AdmmSolver {
         let iterations = iterations.min(self.mus.len());
         for it in 0..iterations {
             let mu = self.mus[it];
-            self.g_step(xf, yf, g_f, mu, t);
+            if theta > 0.0 {
+                // ĝ step with μ + θ, pulled towards (μĥ + θĝ_prev)/(μ + θ).
+                let m = mu + theta;
+                for ((p, h), g) in self.pull.iter_mut().zip(&self.h_f).zip(&self.g_prev) {
+                    *p = (h * mu + g * theta) / m;
+                }
+                std::mem::swap(&mut self.h_f, &mut self.pull);
+                self.g_step(xf, yf, g_f, m, t);
+                std::mem::swap(&mut self.h_f, &mut self.pull);
+            } else {
+                self.g_step(xf, yf, g_f, mu, t);
+            }
             // The final h- and l-updates cannot change the returned ĝ: skip them.
             if it + 1 < iterations {
                 self.h_step(fft, g_f, it, mu);
@@ -449,6 +496,7 @@ mod tests {
             lambda: 0.01,
             penalty: PenaltyKind::None,
             spatial_weight: 0.0,
+            temporal: 0.0,
         };
         let reg = vec![1.0; 36];
         let mut solver =
@@ -562,6 +610,7 @@ mod tests {
             lambda: 0.01,
             penalty: PenaltyKind::Elementwise,
             spatial_weight: 2.0 / 576.0,
+            temporal: 0.0,
         };
         let crop = CropBox::centred(grid, GridSize { h: 8, w: 8 });
         let mut solver = AdmmSolver::new(grid, bins, d, &params, &reg, crop);
@@ -620,6 +669,7 @@ mod tests {
             lambda: 0.01,
             penalty,
             spatial_weight: kappa,
+            temporal: 0.0,
         };
         let crop = CropBox::centred(grid, GridSize { h: 12, w: 12 });
         let mut solver = AdmmSolver::new(grid, bins, d, &params, &reg, crop);
@@ -657,6 +707,64 @@ mod tests {
     }
 
     #[test]
+    fn temporal_term_pulls_the_filter_towards_the_previous_one() {
+        let grid = GridSize { h: 16, w: 16 };
+        let d = 3;
+        let mut fft = Fft2::new(grid);
+        let bins = fft.spectrum_len();
+        let mut s = 11u64;
+        let mut sample = |fft: &mut Fft2| {
+            let mut xs = vec![0.0f32; grid.len()];
+            let mut xf = vec![Complex32::default(); d * bins];
+            for j in 0..d {
+                xs.iter_mut().for_each(|v| *v = lcg(&mut s));
+                fft.forward(&xs, &mut xf[j * bins..(j + 1) * bins]);
+            }
+            xf
+        };
+        let (x1, x2) = (sample(&mut fft), sample(&mut fft));
+        let mut y = vec![0.0; grid.len()];
+        gaussian_label(grid, 1.0, &mut y);
+        let mut yf = vec![Complex32::default(); bins];
+        fft.forward(&y, &mut yf);
+        let reg = reg_window(grid, Size2 { w: 24.0, h: 24.0 }, 4, 0.1, 0.8);
+        let crop = CropBox::centred(grid, GridSize { h: 6, w: 6 });
+        let train = |theta: f32, fft: &mut Fft2| {
+            let params = AdmmParams {
+                iterations: 3,
+                mu_init: 1.0,
+                beta: 20.0,
+                mu_max: 1e4,
+                lambda: 0.01,
+                penalty: PenaltyKind::Elementwise,
+                spatial_weight: 10.0,
+                temporal: theta,
+            };
+            let mut solver = AdmmSolver::new(grid, bins, d, &params, &reg, crop);
+            let mut g = vec![Complex32::default(); d * bins];
+            solver.train(fft, &x1, &yf, &mut g);
+            let first = g.clone();
+            solver.train(fft, &x2, &yf, &mut g);
+            (first, g)
+        };
+        let dist = |a: &[Complex32], b: &[Complex32]| {
+            a.iter()
+                .zip(b)
+                .map(|(u, v)| f64::from((u - v).norm_sqr()))
+                .sum::<f64>()
+                .sqrt()
+        };
+        let (first0, second0) = train(0.0, &mut fft);
+        let (first_t, second_t) = train(15.0, &mut fft);
+        // No previous filter on the first training: the temporal term does nothing there.
+        assert!(dist(&first0, &first_t) < 1e-6 * dist(&first0, &second0));
+        // On the second it pulls the filter towards the first.
+        let (free, pulled) = (dist(&second0, &first0), dist(&second_t, &first_t));
+        eprintln!("distance to the previous filter: theta 0 {free:.4e}, theta 15 {pulled:.4e}");
+        assert!(pulled < 0.5 * free, "{pulled} vs {free}");
+    }
+
+    #[test]
     fn crop_box_is_centred_like_the_reference() {
         let c = CropBox::centred(GridSize { h: 60, w: 60 }, GridSize { h: 10, w: 7 });
         assert_eq!((c.r0, c.r1, c.c0, c.c1), (25, 35, 27, 34));
@@ -672,6 +780,7 @@ mod tests {
             lambda: 0.01,
             penalty: PenaltyKind::Matrix,
             spatial_weight: 0.0,
+            temporal: 0.0,
         };
         assert_eq!(p.mu_schedule(), vec![1.0, 20.0, 400.0, 8000.0, 10000.0]);
     }
