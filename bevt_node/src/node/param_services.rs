@@ -915,14 +915,16 @@ impl ParamServers {
             let Ok(Some((id, r))) = self.set_atomically.receive_request() else {
                 break;
             };
-            // All checked first (each against the current values), then all applied.
+            // All checked first, in order, each against the values the earlier ones set
+            // (on a copy), then all applied.
+            let mut trial = params.clone();
             let checked: Result<Vec<_>, String> = r
                 .parameter
                 .iter()
                 .map(|p| {
-                    params
-                        .check(&p.name, &p.value)
-                        .map(|(v, c)| (p.name.clone(), v, c))
+                    let (v, c) = trial.check(&p.name, &p.value)?;
+                    trial.commit(&p.name, v.clone(), &c);
+                    Ok((p.name.clone(), v, c))
                 })
                 .collect();
             let result = match checked {
