@@ -6,6 +6,7 @@ mod bad_input;
 mod cnn;
 mod dds_hardening;
 mod fastdds_interop;
+mod fuzz;
 mod interop;
 mod lost;
 mod node;

@@ -2,6 +2,8 @@
 //! running the tracker over a synthetic sequence.
 #![allow(clippy::expect_used)] // test-support crate: a failed setup should abort the test
 
+pub mod fuzz;
+
 use bevt_core::eval::synth::SynthParams;
 use bevt_core::{BBox, BevtTracker, Frame, PixelFormat, TrackOutput, Tracker, TrackerConfig};
 use std::path::PathBuf;
