@@ -14,7 +14,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 secs=${1:-300}
 shift || true
-all=(image_raw image_compressed cdr_messages node_requests ros_args params_file tracker_config dataset_manifest annotation)
+all=(image_raw image_compressed cdr_messages node_requests param_requests ros_args params_file tracker_config dataset_manifest annotation)
 if [ $# -eq 0 ]; then targets=("${all[@]}"); else targets=("$@"); fi
 # Seeds, written by the stable harness.
 BEVT_FUZZ_SEED_DIR="$PWD/fuzz/corpus" BEVT_FUZZ_ITERS=0 \

@@ -55,6 +55,11 @@ pub const TARGETS: &[Target] = &[
         seeds: seeds_node_requests,
     },
     Target {
+        name: "param_requests",
+        run: param_requests,
+        seeds: seeds_param_requests,
+    },
+    Target {
         name: "ros_args",
         run: ros_args,
         seeds: seeds_ros_args,
@@ -355,6 +360,82 @@ pub fn node_requests(data: &[u8]) {
             }
         }
     }
+}
+
+/// The parameter services' requests (`list`, `get`, `get_types`, `describe`, `set`):
+/// CDR-decoded as in [`cdr_messages`], then answered by the node's parameter table; a
+/// set is checked and, when accepted, committed.
+pub fn param_requests(data: &[u8]) {
+    use bevt_node::node::param_services::NodeParams;
+    use ros2_client::rcl_interfaces::{
+        DescribeParametersRequest, GetParameterTypesRequest, GetParametersRequest,
+        ListParametersRequest, SetParametersRequest,
+    };
+    if data.len() < 4 {
+        return;
+    }
+    let Ok(rep) = RepresentationIdentifier::from_bytes(&data[..2]) else {
+        return;
+    };
+    let body = &data[4..];
+    let mut params = NodeParams::new(
+        &bevt_node::node::ros::RosSettings::default(),
+        &NodeSettings::default(),
+        &TrackerConfig::default(),
+    );
+    if let Ok((r, _)) = deserialize_from_cdr_with_rep_id::<ListParametersRequest>(body, rep) {
+        let _ = params.list(&r.prefixes, r.depth);
+    }
+    if let Ok((r, _)) = deserialize_from_cdr_with_rep_id::<GetParametersRequest>(body, rep) {
+        assert_eq!(params.get(&r.names).len(), r.names.len());
+    }
+    if let Ok((r, _)) = deserialize_from_cdr_with_rep_id::<GetParameterTypesRequest>(body, rep) {
+        assert_eq!(params.types(&r.names).len(), r.names.len());
+    }
+    if let Ok((r, _)) = deserialize_from_cdr_with_rep_id::<DescribeParametersRequest>(body, rep) {
+        let _ = params.describe(&r.names);
+    }
+    if let Ok((r, _)) = deserialize_from_cdr_with_rep_id::<SetParametersRequest>(body, rep) {
+        for p in &r.parameter {
+            if let Ok((v, change)) = params.check(&p.name, &p.value) {
+                params.commit(&p.name, v, &change);
+            }
+        }
+    }
+}
+
+fn seeds_param_requests() -> Vec<Vec<u8>> {
+    use ros2_client::parameters::raw;
+    use ros2_client::rcl_interfaces::{ListParametersRequest, SetParametersRequest};
+    let set = |name: &str, v: ros2_client::ParameterValue| raw::Parameter {
+        name: name.into(),
+        value: v.into(),
+    };
+    vec![
+        cdr(&ListParametersRequest {
+            prefixes: vec!["tracker".into()],
+            depth: 0,
+        }),
+        cdr(&vec![
+            "reinit_rate_hz".to_string(),
+            "tracker.track_state.lost_threshold".into(),
+        ]),
+        cdr(&SetParametersRequest {
+            parameter: vec![
+                set("reinit_rate_hz", ros2_client::ParameterValue::Double(2.0)),
+                set("reinit_burst", ros2_client::ParameterValue::Integer(5)),
+                set(
+                    "class_id",
+                    ros2_client::ParameterValue::String("car".into()),
+                ),
+                set(
+                    "tracker.track_state.lost_threshold",
+                    ros2_client::ParameterValue::Double(0.1),
+                ),
+                set("domain_id", ros2_client::ParameterValue::Integer(9)),
+            ],
+        }),
+    ]
 }
 
 /// A folder private to this process and `what`, created on first use.
