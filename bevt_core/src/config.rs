@@ -368,6 +368,9 @@ pub struct RedetectionConfig {
     pub reacquire_relative: f32,
     /// Frames in a row a candidate must stay confident before the track is taken back.
     pub reacquire_frames: usize,
+    /// Of `windows_per_frame`, how many go to whole-frame template-match proposals each lost
+    /// frame (0 = none: only the tile walk).
+    pub proposals: usize,
 }
 
 impl Default for RedetectionConfig {
@@ -380,6 +383,7 @@ impl Default for RedetectionConfig {
             reacquire_threshold: 0.5,
             reacquire_relative: 0.5,
             reacquire_frames: 3,
+            proposals: 4,
         }
     }
 }
@@ -983,6 +987,12 @@ impl TrackerConfig {
             "1..=10000 frames",
         )?;
         check(
+            r.proposals <= r.windows_per_frame,
+            "redetection.proposals",
+            r.proposals,
+            "0..=windows_per_frame",
+        )?;
+        check(
             (1..=256).contains(&self.threads),
             "threads",
             self.threads,
@@ -1044,6 +1054,7 @@ impl TrackerConfig {
                 reacquire_threshold: r.reacquire_threshold,
                 reacquire_relative: r.reacquire_relative,
                 reacquire_frames: r.reacquire_frames,
+                proposals: r.proposals,
             },
         })
     }
@@ -1132,6 +1143,9 @@ mod tests {
             }),
             ("redetection.tile_stride", |c| {
                 c.redetection.tile_stride = 0.0
+            }),
+            ("redetection.proposals", |c| {
+                c.redetection.proposals = c.redetection.windows_per_frame + 1
             }),
             ("redetection.reacquire_frames", |c| {
                 c.redetection.reacquire_frames = 0

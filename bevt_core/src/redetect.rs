@@ -8,7 +8,13 @@
 //! 1. the window at the current position is tracked with the frozen filter (the box keeps
 //!    following whatever the filter still sees, e.g. a target that only looks different);
 //! 2. the current candidate, if there is one elsewhere, is followed (one more window);
-//! 3. the rest of the budget walks a [`SearchPlan`]: tiles covering the whole frame, at
+//! 3. up to `proposals` windows go where a whole-frame template match proposes the target
+//!    ([`propose`]: normalised cross-correlation of an [`Appearance`] template — the grey
+//!    target box averaged over confident frames — on the frame downsampled to the
+//!    template's cells, at the scale of the loss; at most [`MAX_PROPOSAL_PIXELS`] positions,
+//!    so its cost is bounded), so a target that re-enters anywhere is looked at on the next
+//!    frame instead of when the tile walk reaches it;
+//! 4. the rest of the budget walks a [`SearchPlan`]: tiles covering the whole frame, at
 //!    every configured scale, **ordered by distance from the last known position** (so the
 //!    search radius grows frame by frame from where the target was), cycling once done.
 //!
@@ -23,6 +29,7 @@
 //! `reacquire_frames` frames in a row, so a brief look-alike does not steal the track.
 
 use crate::geometry::Point2;
+use crate::image::Frame;
 
 /// Upper bound on the tiles of one plan (per scale); the stride grows to respect it.
 pub const MAX_TILES: usize = 1024;
@@ -46,6 +53,8 @@ pub struct RedetectParams {
     pub reacquire_relative: f32,
     /// Frames in a row a candidate must be confident to be accepted.
     pub reacquire_frames: usize,
+    /// Windows per lost frame placed on whole-frame template-match proposals (0 = none).
+    pub proposals: usize,
 }
 
 /// One search window: centre (image pixels) and scale relative to the scale at the loss.
@@ -148,6 +157,244 @@ pub fn candidate_threshold(
     } else {
         p.reacquire_threshold
     }
+}
+
+/// Cells per side of the [`Appearance`] template.
+pub const TEMPLATE_CELLS: usize = 8;
+/// Fewest cells per side a proposal template is matched with.
+const MIN_MATCH_CELLS: usize = 3;
+/// Largest downsampled frame [`propose`] searches, pixels: bounds its cost to this many
+/// positions × at most `TEMPLATE_CELLS²` multiply-adds.
+pub const MAX_PROPOSAL_PIXELS: usize = 1 << 16;
+/// Pixels sampled per cell side when downsampling for [`propose`].
+const CELL_SAMPLES: usize = 4;
+/// Smallest local standard deviation (grey levels) a position needs to be matched.
+const MIN_MATCH_STD: f32 = 1.0;
+
+/// Grey level of pixel `(x, y)` of `frame` (mean of the colour bytes), clamped to the frame.
+fn grey(frame: &Frame<'_>, x: isize, y: isize) -> f32 {
+    let xi = x.clamp(0, frame.width() as isize - 1) as usize;
+    let yi = y.clamp(0, frame.height() as isize - 1) as usize;
+    let bpp = frame.format().bytes_per_pixel();
+    let i = yi * frame.stride() + xi * bpp;
+    let d = frame.data();
+    if bpp == 1 {
+        f32::from(d.get(i).copied().unwrap_or(0))
+    } else {
+        let px = d.get(i..i + 3).unwrap_or(&[0, 0, 0]);
+        (f32::from(px[0]) + f32::from(px[1]) + f32::from(px[2])) / 3.0
+    }
+}
+
+/// The re-detection appearance model: the grey target square (side `√(w·h)`) averaged
+/// into `TEMPLATE_CELLS²` cells, a running mean over the confident frames. Independent of
+/// the correlation filter's features and of its learning gate.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Appearance {
+    cells: Vec<f32>,
+}
+
+impl Appearance {
+    /// True once a frame has been observed.
+    pub fn is_ready(&self) -> bool {
+        !self.cells.is_empty()
+    }
+
+    /// Blends the target square of side `side` pixels at `center` of `frame` in with
+    /// weight `rate` (the first observation is taken as it is).
+    pub fn observe(&mut self, frame: &Frame<'_>, center: Point2, side: f32, rate: f32) {
+        let n = TEMPLATE_CELLS;
+        let cell = side / n as f32;
+        if !(cell.is_finite() && cell > 0.0 && center.x.is_finite() && center.y.is_finite()) {
+            return;
+        }
+        let (x0, y0) = (center.x - side / 2.0, center.y - side / 2.0);
+        let fresh = self.cells.is_empty();
+        if fresh {
+            self.cells = vec![0.0; n * n];
+        }
+        for r in 0..n {
+            let ya = (y0 + r as f32 * cell).floor() as isize;
+            let yb = ((y0 + (r + 1) as f32 * cell).floor() as isize).max(ya + 1);
+            for c in 0..n {
+                let xa = (x0 + c as f32 * cell).floor() as isize;
+                let xb = ((x0 + (c + 1) as f32 * cell).floor() as isize).max(xa + 1);
+                let mut sum = 0.0;
+                for y in ya..yb {
+                    for x in xa..xb {
+                        sum += grey(frame, x, y);
+                    }
+                }
+                let v = sum / ((yb - ya) * (xb - xa)) as f32;
+                let m = &mut self.cells[r * n + c];
+                *m = if fresh { v } else { *m + rate * (v - *m) };
+            }
+        }
+    }
+
+    /// The template resampled to `k × k` cells (area averaging), zero-mean and unit-norm;
+    /// `None` for a flat template.
+    fn matched(&self, k: usize) -> Option<Vec<f32>> {
+        let n = TEMPLATE_CELLS;
+        if self.cells.len() != n * n || k == 0 {
+            return None;
+        }
+        let mut t = vec![0.0f32; k * k];
+        for (i, v) in self.cells.iter().enumerate() {
+            let (r, c) = ((i / n) * k / n, (i % n) * k / n);
+            t[r * k + c] += v;
+        }
+        let mean = t.iter().sum::<f32>() / t.len() as f32;
+        t.iter_mut().for_each(|v| *v -= mean);
+        let norm = t.iter().map(|v| v * v).sum::<f32>().sqrt();
+        if !norm.is_finite() || norm <= f32::EPSILON {
+            return None;
+        }
+        t.iter_mut().for_each(|v| *v /= norm);
+        Some(t)
+    }
+}
+
+/// A whole-frame template-match proposal.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Proposal {
+    /// Centre of the matched square, image pixels.
+    pub center: Point2,
+    /// Normalised cross-correlation, -1..1.
+    pub score: f32,
+}
+
+/// Buffers of [`propose`], reused across frames.
+#[derive(Debug, Clone, Default)]
+pub struct ProposalScratch {
+    small: Vec<f32>,
+    sum: Vec<f64>,
+    sq: Vec<f64>,
+    map: Vec<f32>,
+}
+
+/// Up to `count` proposals for a target square of side `side` pixels: the template's
+/// normalised cross-correlation over the whole frame, downsampled so a template cell is
+/// one pixel (coarser when needed to stay within [`MAX_PROPOSAL_PIXELS`]), best first, at
+/// least one template side apart. Cost: at most `MAX_PROPOSAL_PIXELS` × 16 pixel reads and
+/// `MAX_PROPOSAL_PIXELS` × `TEMPLATE_CELLS²` multiply-adds, whatever the frame size.
+pub fn propose(
+    frame: &Frame<'_>,
+    appearance: &Appearance,
+    side: f32,
+    count: usize,
+    scratch: &mut ProposalScratch,
+) -> Vec<Proposal> {
+    let (fw, fh) = (frame.width(), frame.height());
+    if count == 0 || !side.is_finite() || side <= 0.0 {
+        return Vec::new();
+    }
+    let area_floor = ((fw * fh) as f32 / MAX_PROPOSAL_PIXELS as f32).sqrt();
+    let cell = (side / TEMPLATE_CELLS as f32).max(area_floor).max(1.0);
+    let k = ((side / cell).round() as usize).clamp(MIN_MATCH_CELLS, TEMPLATE_CELLS);
+    let Some(t) = appearance.matched(k) else {
+        return Vec::new();
+    };
+    let (w, h) = ((fw as f32 / cell) as usize, (fh as f32 / cell) as usize);
+    if w < k || h < k {
+        return Vec::new();
+    }
+    // Box-averaged downsampling.
+    let ProposalScratch {
+        small,
+        sum,
+        sq,
+        map,
+    } = scratch;
+    small.clear();
+    small.resize(w * h, 0.0);
+    for v in 0..h {
+        let ya = (v as f32 * cell) as isize;
+        let yb = (((v + 1) as f32 * cell) as isize).max(ya + 1);
+        for u in 0..w {
+            let xa = (u as f32 * cell) as isize;
+            let xb = (((u + 1) as f32 * cell) as isize).max(xa + 1);
+            // At most CELL_SAMPLES² pixels per cell: the cost stays bounded on huge frames.
+            let (sy, sx) = (
+                ((yb - ya) as usize).div_ceil(CELL_SAMPLES),
+                ((xb - xa) as usize).div_ceil(CELL_SAMPLES),
+            );
+            let (mut acc, mut n) = (0.0, 0usize);
+            for y in (ya..yb).step_by(sy) {
+                for x in (xa..xb).step_by(sx) {
+                    acc += grey(frame, x, y);
+                    n += 1;
+                }
+            }
+            small[v * w + u] = acc / n.max(1) as f32;
+        }
+    }
+    // Integral images of the values and their squares, (w+1) × (h+1).
+    let iw = w + 1;
+    sum.clear();
+    sum.resize(iw * (h + 1), 0.0);
+    sq.clear();
+    sq.resize(iw * (h + 1), 0.0);
+    for v in 0..h {
+        let (mut rs, mut rq) = (0.0f64, 0.0f64);
+        for u in 0..w {
+            let x = f64::from(small[v * w + u]);
+            rs += x;
+            rq += x * x;
+            sum[(v + 1) * iw + u + 1] = sum[v * iw + u + 1] + rs;
+            sq[(v + 1) * iw + u + 1] = sq[v * iw + u + 1] + rq;
+        }
+    }
+    let (mw, mh) = (w - k + 1, h - k + 1);
+    map.clear();
+    map.resize(mw * mh, f32::NEG_INFINITY);
+    let nk = (k * k) as f64;
+    for v in 0..mh {
+        for u in 0..mw {
+            let rect = |a: &[f64]| {
+                a[(v + k) * iw + u + k] - a[v * iw + u + k] - a[(v + k) * iw + u] + a[v * iw + u]
+            };
+            let (s, q) = (rect(sum), rect(sq));
+            let var = (q - s * s / nk).max(0.0);
+            if var < f64::from(MIN_MATCH_STD * MIN_MATCH_STD) * nk {
+                continue;
+            }
+            let mut dot = 0.0f32;
+            for r in 0..k {
+                let row = &small[(v + r) * w + u..(v + r) * w + u + k];
+                dot += row
+                    .iter()
+                    .zip(&t[r * k..(r + 1) * k])
+                    .map(|(a, b)| a * b)
+                    .sum::<f32>();
+            }
+            map[v * mw + u] = dot / var.sqrt() as f32;
+        }
+    }
+    // Best first, suppressing everything within one template side of a pick.
+    let mut out = Vec::with_capacity(count);
+    for _ in 0..count {
+        let Some((i, &score)) = map.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)) else {
+            break;
+        };
+        if !score.is_finite() {
+            break;
+        }
+        let (pv, pu) = (i / mw, i % mw);
+        out.push(Proposal {
+            center: Point2 {
+                x: (pu as f32 + k as f32 / 2.0) * cell,
+                y: (pv as f32 + k as f32 / 2.0) * cell,
+            },
+            score,
+        });
+        for v in pv.saturating_sub(k - 1)..(pv + k).min(mh) {
+            for u in pu.saturating_sub(k - 1)..(pu + k).min(mw) {
+                map[v * mw + u] = f32::NEG_INFINITY;
+            }
+        }
+    }
+    out
 }
 
 /// A possible target found by the search.
@@ -253,7 +500,83 @@ mod tests {
             reacquire_threshold: 0.5,
             reacquire_relative: 0.5,
             reacquire_frames: 3,
+            proposals: 4,
         }
+    }
+
+    /// A 400 × 300 grey frame of smooth noise with a 40-px textured square at `at`.
+    fn scene(at: (usize, usize), seed: u32) -> Vec<u8> {
+        let (w, h) = (400, 300);
+        let noise = |x: usize, y: usize, s: u32| {
+            let v = (x as u32 / 3)
+                .wrapping_mul(0x9e37_79b9)
+                .wrapping_add((y as u32 / 3).wrapping_mul(0x85eb_ca6b))
+                ^ s.wrapping_mul(0xc2b2_ae35);
+            (v.wrapping_mul(0x27d4_eb2f) >> 24) as u8
+        };
+        let mut img = vec![0u8; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                img[y * w + x] = 60 + noise(x, y, seed) / 4;
+                let (dx, dy) = (x.wrapping_sub(at.0), y.wrapping_sub(at.1));
+                if dx < 40 && dy < 40 {
+                    img[y * w + x] = if (dx / 10 + dy / 8) % 2 == 0 { 230 } else { 20 };
+                }
+            }
+        }
+        img
+    }
+
+    #[test]
+    fn proposals_find_the_template_anywhere_in_the_frame() {
+        let first = scene((40, 40), 1);
+        let f = Frame::packed(&first, 400, 300, crate::image::PixelFormat::Mono8).unwrap();
+        let mut a = Appearance::default();
+        assert!(!a.is_ready());
+        let mut scratch = ProposalScratch::default();
+        assert!(propose(&f, &a, 40.0, 3, &mut scratch).is_empty());
+        a.observe(&f, Point2 { x: 60.0, y: 60.0 }, 40.0, 1.0);
+        assert!(a.is_ready());
+        // The square moved to the far corner over new background.
+        let later = scene((330, 230), 2);
+        let f = Frame::packed(&later, 400, 300, crate::image::PixelFormat::Mono8).unwrap();
+        let got = propose(&f, &a, 40.0, 3, &mut scratch);
+        assert_eq!(got.len(), 3);
+        let best = got[0];
+        assert!(
+            best.center.distance(&Point2 { x: 350.0, y: 250.0 }) < 6.0,
+            "{best:?}"
+        );
+        assert!(best.score > 0.9 && got[1].score < best.score, "{got:?}");
+        // Picks are at least a template side apart.
+        assert!(got[1].center.distance(&best.center) >= 30.0);
+        // A template of a flat patch proposes nothing; no proposals asked, none given.
+        let mut flat = Appearance::default();
+        flat.observe(&f, Point2 { x: 350.0, y: 250.0 }, 4.0, 1.0);
+        let flat_frame = vec![90u8; 400 * 300];
+        let ff = Frame::packed(&flat_frame, 400, 300, crate::image::PixelFormat::Mono8).unwrap();
+        flat.observe(&ff, Point2 { x: 50.0, y: 50.0 }, 40.0, 1.0);
+        assert!(propose(&f, &flat, 40.0, 3, &mut scratch).is_empty());
+        assert!(propose(&f, &a, 40.0, 0, &mut scratch).is_empty());
+    }
+
+    #[test]
+    fn proposal_cost_is_bounded_on_huge_frames() {
+        // 8000 × 4000 with a 16-px target: the downsampled map stays within the bound.
+        let (w, h) = (8000, 4000);
+        let img = vec![128u8; w * h];
+        let f = Frame::packed(&img, w, h, crate::image::PixelFormat::Mono8).unwrap();
+        let mut a = Appearance::default();
+        let tex = scene((40, 40), 3);
+        let t = Frame::packed(&tex, 400, 300, crate::image::PixelFormat::Mono8).unwrap();
+        a.observe(&t, Point2 { x: 60.0, y: 60.0 }, 40.0, 1.0);
+        let mut scratch = ProposalScratch::default();
+        let _ = propose(&f, &a, 16.0, 2, &mut scratch);
+        assert!(
+            scratch.small.len() <= MAX_PROPOSAL_PIXELS,
+            "{}",
+            scratch.small.len()
+        );
     }
 
     #[test]

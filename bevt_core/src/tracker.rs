@@ -757,6 +757,7 @@ impl Tracker for BevtTracker {
         st.ideal_response();
         let initial_peak = st.m_ideal.iter().copied().fold(0.0f32, f32::max);
         st.confidence = ConfidenceModel::new(self.spec.confidence, initial_peak);
+        lost::observe(&mut st, frame, true);
         self.state = Some(st);
         Ok(())
     }
@@ -896,6 +897,9 @@ impl Tracker for BevtTracker {
                 true
             }
         };
+        if state == TrackState::Tracking {
+            lost::observe(st, frame, false);
+        }
         let (pos, scale) = (st.pos, st.scale);
         Ok(Self::output_at(
             st,

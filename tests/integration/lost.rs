@@ -149,3 +149,52 @@ fn learning_gate_never_skips_more_than_its_bound_in_a_row() {
     assert!(skipped > 3, "skipped {skipped}");
     assert_eq!(longest, 3, "longest run of skipped frames");
 }
+
+/// The reference filter (config/bevt_reference.yaml's filter keys).
+fn reference() -> TrackerConfig {
+    use bevt_core::config::{ScaleEstimator, TrainingSample};
+    use bevt_core::filter::admm::PenaltyKind;
+    let mut cfg = TrackerConfig::default();
+    cfg.features.colornames = false;
+    cfg.detection.scale_estimator = ScaleEstimator::Search;
+    cfg.learning.training_sample = TrainingSample::Fresh;
+    cfg.admm.penalty = PenaltyKind::Matrix;
+    cfg
+}
+
+/// A large frame, a small target that leaves the view and re-enters at the far side.
+fn far_reentry() -> SynthParams {
+    SynthParams {
+        width: 960,
+        height: 540,
+        frames: 90,
+        target: (28.0, 24.0),
+        scale_rate: 1.0,
+        path_amplitude: (30.0, 20.0),
+        camera_velocity: (0.5, -0.3),
+        hidden: Some((HIDE, SHOW)),
+        reappear_offset: (-380.0, 200.0),
+        ..SynthParams::default()
+    }
+}
+
+#[test]
+fn target_reentering_far_away_is_reacquired_quickly() {
+    for (cfg, what) in [
+        (TrackerConfig::default(), "default"),
+        (reference(), "reference"),
+    ] {
+        let seq = far_reentry();
+        let r = track_synthetic(&seq, cfg, seq.truth(0));
+        let states: Vec<TrackState> = r.iter().map(|(o, _)| o.state).collect();
+        let back = (SHOW..seq.frames).find(|&t| states[at(t)] == TrackState::Reacquired);
+        println!("{what}: re-acquired at {back:?}; {states:?}");
+        let back = back.unwrap_or(usize::MAX);
+        assert!(back <= SHOW + 10, "{what}: re-acquired at frame {back}");
+        for t in back..seq.frames {
+            let (o, truth) = &r[at(t)];
+            let e = o.bbox.center().distance(&truth.center());
+            assert!(e < 5.0, "{what}: frame {t}: centre error {e}");
+        }
+    }
+}

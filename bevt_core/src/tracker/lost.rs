@@ -7,12 +7,16 @@ use crate::config::TrackerSpec;
 use crate::error::TrackError;
 use crate::geometry::Point2;
 use crate::image::Frame;
-use crate::redetect::{candidate_threshold, CandidateTracker, SearchPlan};
+use crate::redetect::{
+    candidate_threshold, propose, Appearance, CandidateTracker, ProposalScratch, SearchPlan,
+};
 use crate::tracker::TrackOutput;
 use rustfft::num_complex::Complex32;
 
 /// A search result within this many cells of the candidate is the candidate.
 const CANDIDATE_NEAR_CELLS: f32 = 3.0;
+/// Weight of each confident frame in the re-detection template's running mean.
+const APPEARANCE_RATE: f32 = 0.05;
 /// Consensus reported while lost (no response is compared with the ideal model).
 const LOST_CONSENSUS: f32 = 0.0;
 
@@ -34,6 +38,22 @@ pub(super) struct LostState {
     scale_at_loss: f32,
     /// Confidence a window needs to be a candidate ([`candidate_threshold`]).
     threshold: f32,
+    /// The re-detection template, kept from confident frames, and the proposal buffers.
+    appearance: Appearance,
+    scratch: ProposalScratch,
+}
+
+/// Side of the square the re-detection template covers at `scale`, pixels.
+fn template_side(st: &State, scale: f32) -> f32 {
+    (st.geo.base_target.w * st.geo.base_target.h).sqrt() * scale
+}
+
+/// A confident frame (or the initial one, `first`): blends the target into the
+/// re-detection template.
+pub(super) fn observe(st: &mut State, frame: &Frame<'_>, first: bool) {
+    let side = template_side(st, st.scale);
+    let rate = if first { 1.0 } else { APPEARANCE_RATE };
+    st.lost.appearance.observe(frame, st.pos, side, rate);
 }
 
 /// Saves the model before the first unconfident frame can be learned.
@@ -154,6 +174,29 @@ pub(super) fn search(
             budget = budget.saturating_sub(1);
         }
         None => st.lost.candidates.offer(pos, scale, conf, threshold),
+    }
+    // Whole-frame template-match proposals, at the scale of the loss.
+    let side = template_side(st, st.lost.scale_at_loss);
+    let wanted = if p.enabled {
+        p.proposals.min(budget)
+    } else {
+        0
+    };
+    let proposals = propose(
+        frame,
+        &st.lost.appearance,
+        side,
+        wanted,
+        &mut st.lost.scratch,
+    );
+    for pr in proposals {
+        let scale = st.lost.scale_at_loss;
+        let (pos, conf, peak) = evaluate(st, frame, pr.center, scale, spec)?;
+        if conf > best.0 {
+            best = (conf, peak);
+        }
+        st.lost.candidates.offer(pos, scale, conf, threshold);
+        budget = budget.saturating_sub(1);
     }
     for _ in 0..budget {
         let Some(w) = st.lost.plan.next_window() else {
