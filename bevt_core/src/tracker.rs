@@ -542,6 +542,18 @@ impl BevtTracker {
         let mut ex = ex.boxed_clone();
         ex.set_input_planes(planes);
         let geo = Geometry::new(spec, b.size(), ex.cell_size(), ex.allows_smaller_cells())?;
+        if ex.learns_per_track() {
+            // Per-track state (a CNN channel projection) from the first search patch.
+            let (side, region) = (
+                ex.input_side(geo.patch_side),
+                geo.patch_side as f32 * geo.s0,
+            );
+            let mut sampler = Sampler::default();
+            sampler.prepare(frame, b.center(), region, region, side);
+            let mut patch = Patch::new(side, planes);
+            sampler.sample(b.center(), region, &mut patch);
+            ex.begin_track(&patch)?;
+        }
         let grid = geo.grid;
         let mut fft = Fft2::new(grid);
         let bins = fft.spectrum_len();

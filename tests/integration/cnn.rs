@@ -6,8 +6,10 @@
 use bevt_core::config::{FeatureKind, ScaleEstimator, TrainingSample};
 use bevt_core::eval::synth::SynthParams;
 use bevt_core::features::cnn::{CnnError, CnnExtractor, ORT_DYLIB_ENV};
-use bevt_core::features::cnn_config::{CnnConfig, CnnLayerConfig, InputSizePolicy, LayerNorm};
-use bevt_core::features::{FeatureExtractor, FeatureMap};
+use bevt_core::features::cnn_config::{
+    CnnConfig, CnnHogConfig, CnnLayerConfig, InputSizePolicy, LayerNorm,
+};
+use bevt_core::features::{FeatureExtractor, FeatureMap, Hog};
 use bevt_core::image::Patch;
 use bevt_core::{BevtTracker, Frame, GridSize, PixelFormat, TrackError, Tracker, TrackerConfig};
 use std::path::PathBuf;
@@ -38,6 +40,7 @@ fn layer(output: &str, channels: usize, weight: f32) -> CnnLayerConfig {
         weight,
         gain: 1.0,
         norm: LayerNorm::Rms,
+        project: 0,
     }
 }
 
@@ -131,6 +134,194 @@ fn tiny_model_tracks_a_synthetic_target_end_to_end() {
                 "single pass {single_pass}, from detection {from_detection}, frame {i}: centre error {err}"
             );
         }
+    }
+}
+
+/// A patch of side `side` with a deterministic texture.
+fn textured_patch(side: usize) -> Patch {
+    let mut patch = Patch::new(side, 3);
+    for (i, v) in patch.data.iter_mut().enumerate() {
+        let (r, c) = ((i / side) % side, i % side);
+        *v = (((r * 7 + c * 13) % 64) as f32 * 3.0 + ((i * 37) % 41) as f32).min(255.0);
+    }
+    patch
+}
+
+#[test]
+fn projection_keeps_the_leading_energy_in_fewer_channels() {
+    let Some(rt) = runtime("projection_keeps_the_leading_energy_in_fewer_channels") else {
+        return;
+    };
+    let mut cfg = tiny(&rt);
+    cfg.layers[0].project = 2; // s2: 4 -> 2
+    cfg.layers[1].project = 3; // s4: 6 -> 3
+    let mut ex = CnnExtractor::new(&cfg).unwrap();
+    assert_eq!(ex.channels(), 5);
+    assert_eq!(ex.layers()[0].channels, 2);
+    assert_eq!(ex.layers()[1].channels, 3);
+    assert!(ex.learns_per_track());
+    assert_eq!(ex.projection_energy(0), None);
+    let patch = textured_patch(32);
+    ex.begin_track(&patch).unwrap();
+    // Raw maps of this patch, then the projected ones.
+    ex.prepare_input(&patch);
+    ex.run_prepared(32).unwrap();
+    let raw: Vec<(usize, f64)> = (0..2)
+        .map(|l| {
+            let (c, _, _, d) = ex.layer_map(l).unwrap();
+            (c, d.iter().map(|v| f64::from(*v).powi(2)).sum())
+        })
+        .collect();
+    assert_eq!((raw[0].0, raw[1].0), (4, 6));
+    ex.project_maps().unwrap();
+    for (l, (kept, of)) in [(2usize, 4usize), (3, 6)].into_iter().enumerate() {
+        let (c, _, _, d) = ex.layer_map(l).unwrap();
+        assert_eq!(c, kept);
+        let energy = ex.projection_energy(l).unwrap();
+        // PCA keeps at least the average share and at most everything.
+        assert!(
+            energy >= kept as f32 / of as f32 - 1e-4 && energy <= 1.0 + 1e-4,
+            "layer {l}: energy {energy}"
+        );
+        // Orthonormal directions: the projected energy is exactly the kept share.
+        let proj: f64 = d.iter().map(|v| f64::from(*v).powi(2)).sum();
+        let share = proj / raw[l].1;
+        assert!(
+            (share - f64::from(energy)).abs() < 1e-3,
+            "layer {l}: projected share {share}, learned {energy}"
+        );
+    }
+    // The extractor path gives the projected channel count on the grid.
+    let grid = GridSize { h: 8, w: 8 };
+    let mut out = FeatureMap::new(grid, 5);
+    ex.extract(&patch, 4, &mut out).unwrap();
+    assert!(out.data.iter().all(|v| v.is_finite()));
+    assert!(out.data.iter().any(|v| *v != 0.0));
+    // A map with the unprojected channel count is refused, not silently filled.
+    let mut wrong = FeatureMap::new(grid, 10);
+    assert!(ex.extract(&patch, 4, &mut wrong).is_err());
+}
+
+#[test]
+fn fused_hog_layer_is_hog_of_the_same_patch_with_its_own_weight() {
+    let Some(rt) = runtime("fused_hog_layer_is_hog_of_the_same_patch_with_its_own_weight") else {
+        return;
+    };
+    let hog_cfg = CnnHogConfig {
+        weight: 0.7,
+        gain: 2.0,
+        grayscale: true,
+        colornames: false,
+    };
+    let cfg = CnnConfig {
+        input_size_policy: InputSizePolicy::Patch,
+        hog: Some(hog_cfg),
+        ..tiny(&rt)
+    };
+    let mut ex = CnnExtractor::new(&cfg).unwrap();
+    assert_eq!(ex.layers().len(), 3);
+    assert_eq!(ex.layers()[2].channels, 32); // 31 HOG + gray
+    assert_eq!(ex.layers()[2].weight, 0.7);
+    assert_eq!(ex.channels(), 42);
+    // The patch is grid * cell pixels: the HOG layer sees it unresampled.
+    let patch = textured_patch(32);
+    let grid = GridSize { h: 8, w: 8 };
+    let mut out = FeatureMap::new(grid, 42);
+    ex.extract(&patch, 4, &mut out).unwrap();
+    let mut hog = Hog::new(4, true);
+    let mut alone = FeatureMap::new(grid, 32);
+    hog.extract(&patch, 4, &mut alone).unwrap();
+    let n = grid.len();
+    let fused = &out.data[10 * n..];
+    assert!(alone.data.iter().any(|v| *v > 0.0));
+    for (f, a) in fused.iter().zip(&alone.data) {
+        assert!((f - 2.0 * a).abs() < 1e-5, "{f} vs 2 x {a}");
+    }
+    // The network's channels are what the extractor without HOG gives.
+    let mut plain = CnnExtractor::new(&CnnConfig {
+        input_size_policy: InputSizePolicy::Patch,
+        ..tiny(&rt)
+    })
+    .unwrap();
+    let mut cnn_only = FeatureMap::new(grid, 10);
+    plain.extract(&patch, 4, &mut cnn_only).unwrap();
+    assert_eq!(&out.data[..10 * n], &cnn_only.data[..]);
+    // Colour names join the HOG layer on colour input and leave it on mono8.
+    let mut cn = CnnExtractor::new(&CnnConfig {
+        hog: Some(CnnHogConfig {
+            colornames: true,
+            ..hog_cfg
+        }),
+        ..tiny(&rt)
+    })
+    .unwrap();
+    assert_eq!(cn.channels(), 52);
+    cn.set_input_planes(1);
+    assert_eq!(cn.channels(), 42);
+}
+
+#[test]
+fn tiny_model_with_the_scale_filter_follows_a_growing_target() {
+    use bevt_core::config::{ScaleEstimator, TrainingSample};
+    let Some(rt) = runtime("tiny_model_with_the_scale_filter_follows_a_growing_target") else {
+        return;
+    };
+    // x1.5 over 60 frames (as the HOG fast-mode test); one network pass per frame, the
+    // scale from the scale filter only.
+    let seq = SynthParams {
+        width: 480,
+        height: 360,
+        frames: 60,
+        target: (60.0, 48.0),
+        scale_rate: 1.007,
+        ..SynthParams::default()
+    };
+    for project in [0, 3] {
+        let mut cfg = TrackerConfig::default();
+        cfg.features.kind = FeatureKind::Cnn;
+        // The random-weight layers alone locate the target only roughly; the fused HOG
+        // layer (its own filter) keeps the position, so the scale filter's samples are on
+        // the target.
+        let mut cnn = CnnConfig {
+            input_size_policy: InputSizePolicy::Patch,
+            hog: Some(CnnHogConfig::default()),
+            ..tiny(&rt)
+        };
+        cnn.layers[1].project = project;
+        cfg.features.cnn = Some(cnn);
+        cfg.detection.scale_estimator = ScaleEstimator::Filter;
+        cfg.learning.training_sample = TrainingSample::Shifted;
+        // Random weights give no meaningful confidence: learn every frame, never lost.
+        cfg.verification.score = bevt_core::verify::VerificationScore::Reference;
+        cfg.track_state.lost_threshold = 0.0;
+        let mut t = BevtTracker::try_new(cfg.validate().unwrap()).unwrap();
+        let f0 = seq.frame(0);
+        t.init(
+            &Frame::packed(&f0.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap(),
+            f0.truth,
+        )
+        .unwrap();
+        let mut last = None;
+        let mut learned = 0;
+        for i in 1..seq.frames {
+            let f = seq.frame(i);
+            let out = t
+                .update(&Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap())
+                .unwrap();
+            learned += usize::from(out.learned);
+            last = Some((out, f.truth));
+        }
+        let (out, truth) = last.unwrap();
+        let grown = out.bbox.w / f0.truth.w;
+        let truth_grown = truth.w / f0.truth.w;
+        assert!(truth_grown > 1.45, "{truth_grown}");
+        assert!(
+            (grown / truth_grown - 1.0).abs() < 0.08,
+            "project {project}: box grew x{grown}, the target x{truth_grown}; {learned} frames \
+             learned, last {out:?}"
+        );
+        let err = out.bbox.center().distance(&truth.center());
+        assert!(err < 10.0, "project {project}: centre error {err}");
     }
 }
 
@@ -338,10 +529,43 @@ fn tracker_reports_a_bad_cnn_model_at_init_and_never_falls_back_to_hog() {
 
 #[test]
 fn cnn_presets_parse_and_validate() {
-    for p in ["cnn_nanotrack", "cnn_mobilenetv2", "cnn_vgg19"] {
+    use bevt_core::config::{ScaleEstimator, TrainingSample};
+    let defaults = TrackerConfig::default();
+    for p in [
+        "cnn_fusion",
+        "cnn_nanotrack",
+        "cnn_mobilenetv2",
+        "cnn_vgg19",
+    ] {
         let path = repo().join("config").join(format!("{p}.yaml"));
         let spec = bevt_node::params::load_config(Some(&path), &[]).unwrap();
+        let c = &spec.config;
+        // The presets omit every non-feature key that equals the default (no drift).
+        assert_eq!(c.window, defaults.window, "{p}");
+        // The CNN numbers were measured with the reference's matrix penalty (pinned).
+        assert_eq!(
+            c.admm.penalty,
+            bevt_core::filter::admm::PenaltyKind::Matrix,
+            "{p}"
+        );
+        let mut admm = c.admm.clone();
+        admm.penalty = defaults.admm.penalty;
+        assert_eq!(admm, defaults.admm, "{p}");
+        assert_eq!(c.confidence, defaults.confidence, "{p}");
+        assert_eq!(c.redetection, defaults.redetection, "{p}");
+        let one_pass = matches!(p, "cnn_fusion" | "cnn_nanotrack");
+        assert_eq!(
+            c.detection.scale_estimator == ScaleEstimator::Filter,
+            one_pass,
+            "{p}"
+        );
+        assert_eq!(
+            c.learning.training_sample == TrainingSample::Shifted,
+            one_pass,
+            "{p}"
+        );
         let cnn = spec.config.features.cnn.unwrap();
+        assert_eq!(cnn.hog.is_some(), p == "cnn_fusion", "{p}");
         assert_eq!(spec.config.features.kind, FeatureKind::Cnn);
         if p != "cnn_vgg19" {
             assert!(

@@ -13,13 +13,21 @@
 //!
 //! Speed: the session is built once and shared by clones of the extractor; input and map
 //! buffers are reused; [`FeatureExtractor::extract_scales`] gives every scale of a frame
-//! from one network pass on the largest scale's patch.
+//! from one network pass on the largest scale's patch. A layer with `project: N` is
+//! projected onto its N principal directions (ECO's channel projection), learned on each
+//! track's first patch ([`FeatureExtractor::begin_track`]) from the layer's uncentred second
+//! moments (so the kept share of the feature energy is maximal), and applied on the
+//! network's own grid before resampling.
+//!
+//! Fusion: with `features.cnn.hog`, HOG (+ gray) (+ colour names) of the same search patch,
+//! resampled to `grid · cell_size` pixels, is appended as one more layer with its own filter
+//! and weight.
 
 use crate::error::TrackError;
 use crate::features::cnn_config::{
-    ChannelOrder, CnnConfig, CnnDevice, InputSizePolicy, LayerNorm, MAX_INPUT_SIZE,
+    ChannelOrder, CnnConfig, CnnDevice, CnnHogConfig, InputSizePolicy, LayerNorm, MAX_INPUT_SIZE,
 };
-use crate::features::{FeatureExtractor, FeatureMap, LayerInfo};
+use crate::features::{FeatureExtractor, FeatureMap, Hog, LayerInfo};
 use crate::geometry::GridSize;
 use crate::image::Patch;
 use ort::environment::Environment;
@@ -219,14 +227,134 @@ fn taps(n: usize, src_n: usize, fraction: f32, out: &mut Vec<Tap>) {
     }
 }
 
-/// One layer's last map, as returned by the network.
+/// One layer's last map, as returned by the network (or projected).
 #[derive(Debug, Clone, Default)]
 struct LayerMap {
+    /// Channels of `data` (the network's, or the projection's after [`CnnExtractor::project_maps`]).
+    c: usize,
     h: usize,
     w: usize,
     data: Vec<f32>,
     /// Multiplier applied while resampling (gain over RMS, or gain).
     factor: f32,
+}
+
+/// A learned channel projection: `rows × cols` row-major (`rows` principal directions of
+/// `cols` channels), and the share of the layer's energy it kept on the patch it was
+/// learned on.
+#[derive(Debug, Clone, Default)]
+struct Projection {
+    rows: usize,
+    cols: usize,
+    matrix: Vec<f32>,
+    energy: f32,
+}
+
+impl Projection {
+    /// The `rows` leading eigenvectors of the uncentred second-moment matrix of `data`
+    /// (`cols` channels of `n` values each).
+    fn learn(data: &[f32], cols: usize, n: usize, rows: usize) -> Result<Self, CnnError> {
+        let mut m = nalgebra::DMatrix::<f64>::zeros(cols, cols);
+        for i in 0..cols {
+            let a = &data[i * n..(i + 1) * n];
+            for j in 0..=i {
+                let b = &data[j * n..(j + 1) * n];
+                let v: f64 = a
+                    .iter()
+                    .zip(b)
+                    .map(|(x, y)| f64::from(*x) * f64::from(*y))
+                    .sum();
+                m[(i, j)] = v;
+                m[(j, i)] = v;
+            }
+        }
+        let trace = m.trace();
+        let eig = m.symmetric_eigen();
+        let mut order: Vec<usize> = (0..cols).collect();
+        order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+        let mut matrix = Vec::with_capacity(rows * cols);
+        let mut kept = 0.0;
+        for &k in order.iter().take(rows) {
+            kept += eig.eigenvalues[k].max(0.0);
+            let v = eig.eigenvectors.column(k);
+            // Sign fixed (largest component positive), so a projection is reproducible.
+            let big = v
+                .iter()
+                .copied()
+                .fold(0.0f64, |a, x| if x.abs() > a.abs() { x } else { a });
+            let sign = if big < 0.0 { -1.0 } else { 1.0 };
+            matrix.extend(v.iter().map(|x| (x * sign) as f32));
+        }
+        if matrix.len() != rows * cols || matrix.iter().any(|v| !v.is_finite()) {
+            return Err(CnnError::Run(
+                "features.cnn.layers.project: the channel projection is not finite".to_string(),
+            ));
+        }
+        Ok(Self {
+            rows,
+            cols,
+            matrix,
+            energy: if trace > 0.0 {
+                (kept / trace) as f32
+            } else {
+                1.0
+            },
+        })
+    }
+
+    /// `out[k] = Σ_c matrix[k][c] · data[c]` over `n` values per channel.
+    fn apply(&self, data: &[f32], n: usize, out: &mut Vec<f32>) {
+        out.clear();
+        out.resize(self.rows * n, 0.0);
+        for (k, dst) in out.chunks_exact_mut(n).enumerate() {
+            let row = &self.matrix[k * self.cols..(k + 1) * self.cols];
+            for (c, &p) in row.iter().enumerate() {
+                let src = &data[c * n..(c + 1) * n];
+                for (d, s) in dst.iter_mut().zip(src) {
+                    *d += p * s;
+                }
+            }
+        }
+    }
+}
+
+/// The HOG layer of a fused extractor and its buffers.
+#[derive(Debug, Clone)]
+struct HogLayer {
+    cfg: CnnHogConfig,
+    hog: Hog,
+    patch: Patch,
+    feat: FeatureMap,
+}
+
+/// Resamples the centred `fraction` of `src` bilinearly (half-pixel centres) onto `dst`
+/// (side `dst.side`, planes taken from `src`).
+fn resize_centred(
+    src: &Patch,
+    fraction: f32,
+    dst: &mut Patch,
+    rows: &mut Vec<Tap>,
+    cols: &mut Vec<Tap>,
+) {
+    let side = dst.side;
+    dst.planes = src.planes;
+    dst.data.resize(side * side * src.planes, 0.0);
+    taps(side, src.side, fraction, rows);
+    taps(side, src.side, fraction, cols);
+    let n = src.side;
+    for p in 0..src.planes {
+        let s = src.plane(p);
+        let d = &mut dst.data[p * side * side..(p + 1) * side * side];
+        for (r, rt) in rows.iter().enumerate() {
+            let a = &s[rt.i0 * n..(rt.i0 + 1) * n];
+            let b = &s[rt.i1 * n..(rt.i1 + 1) * n];
+            for (o, ct) in d[r * side..(r + 1) * side].iter_mut().zip(cols.iter()) {
+                let top = (1.0 - ct.w) * a[ct.i0] + ct.w * a[ct.i1];
+                let bot = (1.0 - ct.w) * b[ct.i0] + ct.w * b[ct.i1];
+                *o = (1.0 - rt.w) * top + rt.w * bot;
+            }
+        }
+    }
 }
 
 /// CNN feature extractor over an ONNX model (see the module doc).
@@ -236,6 +364,10 @@ pub struct CnnExtractor {
     layers: Vec<LayerInfo>,
     input: Vec<f32>,
     maps: Vec<LayerMap>,
+    /// Per layer: its learned projection (layers with `project: N` only).
+    proj: Vec<Option<Projection>>,
+    /// HOG fused as one more layer (`features.cnn.hog`).
+    hog: Option<HogLayer>,
     rows: Vec<Tap>,
     cols: Vec<Tap>,
     tmp: Vec<f32>,
@@ -290,25 +422,25 @@ impl CnnExtractor {
             .commit_from_file(model)
             .map_err(|e| model_err(e.to_string()))?;
         Self::check_io(&session, cfg)?;
-        let layers = cfg
-            .layers
-            .iter()
-            .map(|l| LayerInfo {
-                name: l.output.clone(),
-                channels: l.channels,
-                weight: l.weight,
-            })
-            .collect();
+        let hog = cfg.hog.map(|h| HogLayer {
+            hog: Hog::with_colornames(cfg.cell_size, h.grayscale, h.colornames),
+            cfg: h,
+            patch: Patch::default(),
+            feat: FeatureMap::default(),
+        });
         let mut ex = Self {
             cfg: Arc::new(cfg.clone()),
             session: Arc::new(Mutex::new(session)),
-            layers,
+            layers: Vec::new(),
             input: Vec::new(),
             maps: vec![LayerMap::default(); cfg.layers.len()],
+            proj: vec![None; cfg.layers.len()],
+            hog,
             rows: Vec::new(),
             cols: Vec::new(),
             tmp: Vec::new(),
         };
+        ex.layers = ex.layer_info();
         let side = cfg.input_size;
         let grey = vec![PROBE_GREY; 3 * side * side];
         ex.input = grey.clone();
@@ -401,6 +533,96 @@ impl CnnExtractor {
         &self.cfg
     }
 
+    /// The layers the tracker sees: the network's (projected channel counts), then HOG.
+    fn layer_info(&self) -> Vec<LayerInfo> {
+        let mut v: Vec<LayerInfo> = self
+            .cfg
+            .layers
+            .iter()
+            .map(|l| LayerInfo {
+                name: l.output.clone(),
+                channels: l.out_channels(),
+                weight: l.weight,
+            })
+            .collect();
+        if let Some(h) = &self.hog {
+            v.extend(h.hog.layers().iter().map(|l| LayerInfo {
+                weight: h.cfg.weight,
+                ..l.clone()
+            }));
+        }
+        v
+    }
+
+    /// Channels of the network's layers after projection (HOG excluded).
+    fn cnn_channels(&self) -> usize {
+        self.cfg.layers.iter().map(|l| l.out_channels()).sum()
+    }
+
+    /// Share of layer `l`'s energy its learned projection kept on the patch it was learned
+    /// on, or `None` when the layer has no (learned) projection.
+    pub fn projection_energy(&self, l: usize) -> Option<f32> {
+        self.proj.get(l)?.as_ref().map(|p| p.energy)
+    }
+
+    /// Learns every configured projection from the last raw maps (see [`Self::run_prepared`]).
+    ///
+    /// # Errors
+    /// [`CnnError::Run`] when a map is not the network's raw map or the projection is not finite.
+    pub fn learn_projections(&mut self) -> Result<(), CnnError> {
+        for ((l, map), proj) in self
+            .cfg
+            .layers
+            .iter()
+            .zip(&self.maps)
+            .zip(self.proj.iter_mut())
+        {
+            if l.project == 0 {
+                continue;
+            }
+            if map.c != l.channels {
+                return Err(CnnError::Run(format!(
+                    "layer `{}`: a projection is learned from the network's {} channels, not {}",
+                    l.output, l.channels, map.c
+                )));
+            }
+            *proj = Some(Projection::learn(
+                &map.data,
+                map.c,
+                map.h * map.w,
+                l.project,
+            )?);
+        }
+        Ok(())
+    }
+
+    /// Projects every layer with `project: N` onto its N learned directions (the projection
+    /// stage), learning them first from these maps if they are not learned yet.
+    ///
+    /// # Errors
+    /// As [`Self::learn_projections`].
+    pub fn project_maps(&mut self) -> Result<(), CnnError> {
+        let needs = self
+            .cfg
+            .layers
+            .iter()
+            .zip(&self.proj)
+            .any(|(l, p)| l.project > 0 && p.is_none());
+        if needs {
+            self.learn_projections()?;
+        }
+        for (map, proj) in self.maps.iter_mut().zip(&self.proj) {
+            if let Some(p) = proj {
+                if map.c == p.cols {
+                    p.apply(&map.data, map.h * map.w, &mut self.tmp);
+                    std::mem::swap(&mut map.data, &mut self.tmp);
+                    map.c = p.rows;
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// Runs the network on a raw NCHW input (`[1, 3, side, side]`, already normalised) and
     /// keeps the layers' maps; for checking a model against reference values.
     ///
@@ -418,11 +640,11 @@ impl CnnExtractor {
         self.run_prepared(side)
     }
 
-    /// Layer `l`'s last raw map as `(channels, h, w, values)`.
+    /// Layer `l`'s last map as `(channels, h, w, values)` (raw after [`Self::run_prepared`],
+    /// projected after [`Self::project_maps`]).
     pub fn layer_map(&self, l: usize) -> Option<(usize, usize, usize, &[f32])> {
         let m = self.maps.get(l)?;
-        let c = self.layers.get(l)?.channels;
-        Some((c, m.h, m.w, &m.data))
+        Some((m.c, m.h, m.w, &m.data))
     }
 
     /// Fills the input tensor from `patch`: plane order, `value_scale`, mean and std (the
@@ -503,6 +725,7 @@ impl CnnExtractor {
                     name: l.output.clone(),
                 });
             }
+            map.c = l.channels;
             map.h = usize::try_from(dims[2]).unwrap_or(0);
             map.w = usize::try_from(dims[3]).unwrap_or(0);
             if map.h == 0 || map.w == 0 || data.len() != l.channels * map.h * map.w {
@@ -529,10 +752,52 @@ impl CnnExtractor {
         Ok(())
     }
 
-    /// Runs the network on `patch`.
+    /// Runs the network on `patch` and projects its maps.
     fn run_patch(&mut self, patch: &Patch) -> Result<(), CnnError> {
         self.prepare_input(patch);
-        self.run_prepared(patch.side)
+        self.run_prepared(patch.side)?;
+        self.project_maps()
+    }
+
+    /// HOG of the centred `fraction` of `patch` at `out`'s grid and `cell`, times its gain,
+    /// into `out`'s channels after the network's.
+    fn hog_into(
+        &mut self,
+        patch: &Patch,
+        fraction: f32,
+        cell: usize,
+        out: &mut FeatureMap,
+    ) -> Result<(), TrackError> {
+        let ch0 = self.cnn_channels();
+        let Some(h) = self.hog.as_mut() else {
+            return Ok(());
+        };
+        let side = out.grid.w.max(out.grid.h) * cell;
+        if h.patch.side != side {
+            h.patch = Patch::new(side, patch.planes);
+        }
+        resize_centred(
+            patch,
+            fraction,
+            &mut h.patch,
+            &mut self.rows,
+            &mut self.cols,
+        );
+        let hc = h.hog.channels();
+        if h.feat.grid != out.grid || h.feat.channels != hc {
+            h.feat = FeatureMap::new(out.grid, hc);
+        }
+        h.hog.extract(&h.patch, cell, &mut h.feat)?;
+        let n = out.grid.len();
+        let dst = out
+            .data
+            .get_mut(ch0 * n..(ch0 + hc) * n)
+            .ok_or_else(|| TrackError::Feature("feature map too small for the HOG layer".into()))?;
+        let g = h.cfg.gain;
+        for (d, s) in dst.iter_mut().zip(&h.feat.data) {
+            *d = g * s;
+        }
+        Ok(())
     }
 
     /// Resamples every layer's centred `fraction` of the last maps to `out`'s grid,
@@ -546,7 +811,7 @@ impl CnnExtractor {
             taps(gw, map.w, fraction, &mut self.cols);
             self.tmp.resize(map.w, 0.0);
             let plane = map.h * map.w;
-            for c in 0..info.channels {
+            for c in 0..info.channels.min(map.c) {
                 let src = &map.data[c * plane..(c + 1) * plane];
                 let dst = &mut out.data[(ch0 + c) * n..(ch0 + c + 1) * n];
                 for (r, rt) in self.rows.iter().enumerate() {
@@ -612,6 +877,27 @@ impl FeatureExtractor for CnnExtractor {
         self.cfg.train_from_detection
     }
 
+    fn set_input_planes(&mut self, planes: usize) {
+        if let Some(h) = self.hog.as_mut() {
+            h.hog.set_input_planes(planes);
+        }
+        self.layers = self.layer_info();
+    }
+
+    fn learns_per_track(&self) -> bool {
+        self.cfg.layers.iter().any(|l| l.project > 0)
+    }
+
+    fn begin_track(&mut self, patch: &Patch) -> Result<(), TrackError> {
+        if !self.learns_per_track() {
+            return Ok(());
+        }
+        self.prepare_input(patch);
+        self.run_prepared(patch.side)?;
+        self.learn_projections()?;
+        Ok(())
+    }
+
     fn extract_scales(
         &mut self,
         patch: &Patch,
@@ -620,7 +906,10 @@ impl FeatureExtractor for CnnExtractor {
     ) -> Result<(), TrackError> {
         self.run_patch(patch)?;
         for (f, out) in fractions.iter().zip(outs.iter_mut()) {
-            self.resample_into(f.clamp(f32::MIN_POSITIVE, 1.0), out);
+            let f = f.clamp(f32::MIN_POSITIVE, 1.0);
+            self.resample_into(f, out);
+            let cell = self.cfg.cell_size;
+            self.hog_into(patch, f, cell, out)?;
         }
         Ok(())
     }
@@ -628,12 +917,19 @@ impl FeatureExtractor for CnnExtractor {
     fn extract(
         &mut self,
         patch: &Patch,
-        _cell: usize,
+        cell: usize,
         out: &mut FeatureMap,
     ) -> Result<(), TrackError> {
+        if out.channels != self.channels() || out.data.len() != out.grid.len() * out.channels {
+            return Err(TrackError::Feature(format!(
+                "feature map has {} channels, the CNN layers give {}",
+                out.channels,
+                self.channels()
+            )));
+        }
         self.run_patch(patch)?;
         self.resample_into(1.0, out);
-        Ok(())
+        self.hog_into(patch, 1.0, cell, out)
     }
 
     fn boxed_clone(&self) -> Box<dyn FeatureExtractor> {
@@ -643,6 +939,8 @@ impl FeatureExtractor for CnnExtractor {
             layers: self.layers.clone(),
             input: Vec::new(),
             maps: self.maps.clone(),
+            proj: self.proj.clone(),
+            hog: self.hog.clone(),
             rows: Vec::new(),
             cols: Vec::new(),
             tmp: Vec::new(),

@@ -19,6 +19,8 @@ pub const MAX_INPUT_SIZE: usize = 512;
 pub const MAX_LAYER_CHANNELS: usize = 4096;
 /// Most layers of one model.
 pub const MAX_LAYERS: usize = 8;
+/// Largest layer a PCA projection is learned for (its C × C eigenproblem runs at init).
+pub const MAX_PROJECTED_CHANNELS: usize = 1024;
 /// Largest intra-op thread count.
 pub const MAX_INTRA_THREADS: usize = 64;
 
@@ -85,6 +87,48 @@ pub struct CnnLayerConfig {
     /// Normalisation of the layer's map.
     #[serde(default = "default_norm")]
     pub norm: LayerNorm,
+    /// Channels after a PCA projection learned on each track's first frame (ECO style:
+    /// FFTs, ADMM and detection then work on this many channels); 0 = no projection.
+    #[serde(default)]
+    pub project: usize,
+}
+
+impl CnnLayerConfig {
+    /// Channels this layer gives the tracker: `project` when set, else `channels`.
+    pub fn out_channels(&self) -> usize {
+        if self.project > 0 {
+            self.project
+        } else {
+            self.channels
+        }
+    }
+}
+
+/// HOG (+ gray) (+ colour names) fused with the CNN layers (`features.cnn.hog`): one more
+/// layer with its own filter and response weight, computed on the same search patch at the
+/// CNN's cell size.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CnnHogConfig {
+    /// Weight of the HOG layer's response in the fused response.
+    pub weight: f32,
+    /// Gain on the HOG values (on top of `features.gain`, which scales every layer).
+    pub gain: f32,
+    /// Append a cell-mean grayscale channel.
+    pub grayscale: bool,
+    /// Append the 10 colour-name channels (colour frames only).
+    pub colornames: bool,
+}
+
+impl Default for CnnHogConfig {
+    fn default() -> Self {
+        Self {
+            weight: 1.0,
+            gain: 1.0,
+            grayscale: true,
+            colornames: false,
+        }
+    }
 }
 
 fn one() -> f32 {
@@ -136,6 +180,8 @@ pub struct CnnConfig {
     /// Train on the winning scale's detection features shifted onto the new position (one
     /// network pass per frame fewer, as ECO) instead of a fresh pass at the new position.
     pub train_from_detection: bool,
+    /// HOG fused with the CNN layers as one more layer (absent = CNN layers only).
+    pub hog: Option<CnnHogConfig>,
 }
 
 impl Default for CnnConfig {
@@ -157,11 +203,13 @@ impl Default for CnnConfig {
                 weight: 1.0,
                 gain: 1.0,
                 norm: LayerNorm::Rms,
+                project: 0,
             }],
             intra_threads: 1,
             device: CnnDevice::Cpu,
             single_pass_scales: false,
             train_from_detection: false,
+            hog: None,
         }
     }
 }
@@ -262,6 +310,32 @@ impl CnnConfig {
                 l.gain,
                 "(0, 1e6]",
             )?;
+            check(
+                l.project <= l.channels,
+                "features.cnn.layers.project",
+                l.project,
+                "0 (no projection) or 1..=the layer's channels",
+            )?;
+            check(
+                l.project == 0 || l.channels <= MAX_PROJECTED_CHANNELS,
+                "features.cnn.layers.project",
+                l.project,
+                "0 for layers of more than 1024 channels (the PCA is C x C)",
+            )?;
+        }
+        if let Some(h) = &self.hog {
+            check(
+                h.weight.is_finite() && h.weight > 0.0,
+                "features.cnn.hog.weight",
+                h.weight,
+                "> 0",
+            )?;
+            check(
+                h.gain.is_finite() && h.gain > 0.0 && h.gain <= 1e6,
+                "features.cnn.hog.gain",
+                h.gain,
+                "(0, 1e6]",
+            )?;
         }
         check(
             (1..=MAX_INTRA_THREADS).contains(&self.intra_threads),
@@ -312,6 +386,30 @@ mod tests {
         let mut c = nanotrack();
         c.input_size = 100_000;
         assert!(c.validate().is_err());
+        let mut c = nanotrack();
+        c.layers[0].project = 49;
+        match c.validate() {
+            Err(ConfigError::OutOfRange { field, .. }) => {
+                assert_eq!(field, "features.cnn.layers.project")
+            }
+            other => panic!("{other:?}"),
+        }
+        c.layers[0].project = 48;
+        c.validate().unwrap();
+        assert_eq!(c.layers[0].out_channels(), 48);
+        c.layers[0].project = 16;
+        assert_eq!(c.layers[0].out_channels(), 16);
+        let mut c = nanotrack();
+        c.hog = Some(CnnHogConfig {
+            weight: 0.0,
+            ..CnnHogConfig::default()
+        });
+        match c.validate() {
+            Err(ConfigError::OutOfRange { field, .. }) => {
+                assert_eq!(field, "features.cnn.hog.weight")
+            }
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]
@@ -324,5 +422,18 @@ mod tests {
             "layers:\n  - output: x\n    channels: 1\n    wieght: 2\n"
         )
         .is_err());
+        assert!(serde_norway::from_str::<CnnConfig>(
+            "layers:\n  - output: x\n    channels: 8\n    projet: 2\n"
+        )
+        .is_err());
+        assert!(serde_norway::from_str::<CnnConfig>("hog:\n  wieght: 2\n").is_err());
+        let c: CnnConfig = serde_norway::from_str("hog:\n  weight: 0.5\n").unwrap();
+        assert_eq!(
+            c.hog,
+            Some(CnnHogConfig {
+                weight: 0.5,
+                ..CnnHogConfig::default()
+            })
+        );
     }
 }

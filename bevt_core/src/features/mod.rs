@@ -110,6 +110,23 @@ pub trait FeatureExtractor: Send {
         false
     }
 
+    /// Whether [`Self::begin_track`] wants each track's first search patch (the tracker
+    /// samples one only then).
+    fn learns_per_track(&self) -> bool {
+        false
+    }
+
+    /// Learns per-track state from the first frame's search patch (side
+    /// [`Self::input_side`]), e.g. a channel projection (ECO). The tracker calls it on its
+    /// per-track copy before cloning that for its workers, so every worker shares the state.
+    ///
+    /// # Errors
+    /// [`TrackError::Feature`] when the backend fails.
+    fn begin_track(&mut self, patch: &Patch) -> Result<(), TrackError> {
+        let _ = patch;
+        Ok(())
+    }
+
     /// Whether [`Self::extract_scales`] is supported: the tracker then extracts all scales of
     /// a frame from one pass on the largest scale's patch.
     fn single_pass_scales(&self) -> bool {
