@@ -27,6 +27,22 @@ vision = {
         "std_msgs/Header header\nvision_msgs/ObjectHypothesisWithPose[] results\n"
         "vision_msgs/BoundingBox2D bbox\nstring id\n",
     "vision_msgs/msg/Detection2DArray": "std_msgs/Header header\nvision_msgs/Detection2D[] detections\n",
+    # foxglove_msgs as released for ROS 2 (bevt replay's overlay), from msgs/src/ros2msg.rs.
+    "foxglove_msgs/msg/Point2": "float64 x\nfloat64 y\n",
+    "foxglove_msgs/msg/Color": "float64 r\nfloat64 g\nfloat64 b\nfloat64 a\n",
+    "foxglove_msgs/msg/CircleAnnotation":
+        "builtin_interfaces/Time timestamp\nfoxglove_msgs/Point2 position\nfloat64 diameter\n"
+        "float64 thickness\nfoxglove_msgs/Color fill_color\nfoxglove_msgs/Color outline_color\n",
+    "foxglove_msgs/msg/PointsAnnotation":
+        "builtin_interfaces/Time timestamp\nuint8 LINE_LOOP=2\nuint8 type\nfoxglove_msgs/Point2[] points\n"
+        "foxglove_msgs/Color outline_color\nfoxglove_msgs/Color[] outline_colors\n"
+        "foxglove_msgs/Color fill_color\nfloat64 thickness\n",
+    "foxglove_msgs/msg/TextAnnotation":
+        "builtin_interfaces/Time timestamp\nfoxglove_msgs/Point2 position\nstring text\n"
+        "float64 font_size\nfoxglove_msgs/Color text_color\nfoxglove_msgs/Color background_color\n",
+    "foxglove_msgs/msg/ImageAnnotations":
+        "foxglove_msgs/CircleAnnotation[] circles\nfoxglove_msgs/PointsAnnotation[] points\n"
+        "foxglove_msgs/TextAnnotation[] texts\n",
     "std_srvs/msg/Trigger_Request": "uint8 structure_needs_at_least_one_member\n",
     "std_srvs/msg/Trigger_Response": "bool success\nstring message\n",
 }
@@ -75,6 +91,21 @@ samples["reinit_request"] = T("bevt_msgs/msg/Reinit_Request")(
 samples["reinit_response"] = T("bevt_msgs/msg/Reinit_Response")(success=True, message="ok")
 samples["trigger_request"] = T("std_srvs/msg/Trigger_Request")(structure_needs_at_least_one_member=0)
 samples["trigger_response"] = T("std_srvs/msg/Trigger_Response")(success=True, message="stopped")
+
+F = lambda n: T("foxglove_msgs/msg/" + n)
+green = F("Color")(r=0.0, g=1.0, b=0.25, a=1.0)
+clear = F("Color")(r=0.0, g=0.0, b=0.0, a=0.0)
+stamp = Time(sec=1700000000, nanosec=123456789)
+samples["image_annotations"] = F("ImageAnnotations")(
+    circles=[F("CircleAnnotation")(timestamp=stamp, position=F("Point2")(x=120.5, y=65.25),
+                                   diameter=4.0, thickness=1.5, fill_color=green, outline_color=clear)],
+    points=[F("PointsAnnotation")(timestamp=stamp, type=2,
+                                  points=[F("Point2")(x=100.5, y=50.25), F("Point2")(x=140.5, y=50.25),
+                                          F("Point2")(x=140.5, y=80.25), F("Point2")(x=100.5, y=80.25)],
+                                  outline_color=green, outline_colors=[], fill_color=clear, thickness=2.0)],
+    texts=[F("TextAnnotation")(timestamp=stamp, position=F("Point2")(x=100.5, y=48.0),
+                               text="track 7 0.88", font_size=14.0, text_color=green,
+                               background_color=clear)])
 
 for name, msg in samples.items():
     data = bytes(ts.serialize_cdr(msg, msg.__msgtype__))

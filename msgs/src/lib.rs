@@ -14,6 +14,8 @@
 
 use serde::{Deserialize, Serialize};
 
+pub mod ros2msg;
+
 /// A ROS type name: package and type, e.g. `("sensor_msgs", "Image")`.
 pub trait RosType {
     /// ROS package, e.g. `sensor_msgs`.
@@ -115,6 +117,63 @@ pub mod sensor_msgs {
         pub data: Vec<u8>,
     }
     ros_type!(CompressedImage, "sensor_msgs", "CompressedImage");
+
+    /// A `sensor_msgs/Image` whose pixels are borrowed from the serialised message (a
+    /// recorded bag's buffer): decoding it copies no pixel data.
+    #[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+    pub struct ImageView<'a> {
+        /// Stamp and camera frame.
+        pub header: std_msgs::Header,
+        /// Rows.
+        pub height: u32,
+        /// Columns.
+        pub width: u32,
+        /// Pixel encoding, e.g. `rgb8`.
+        pub encoding: String,
+        /// Byte order of multi-byte pixels.
+        pub is_bigendian: u8,
+        /// Row length, bytes.
+        pub step: u32,
+        /// Pixels, borrowed.
+        pub data: &'a [u8],
+    }
+
+    /// A `sensor_msgs/CompressedImage` whose bytes are borrowed (see [`ImageView`]).
+    #[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+    pub struct CompressedImageView<'a> {
+        /// Stamp and camera frame.
+        pub header: std_msgs::Header,
+        /// `jpeg` or `png`.
+        pub format: String,
+        /// The compressed bytes, borrowed.
+        pub data: &'a [u8],
+    }
+
+    impl Image {
+        /// A borrowed view (the header and encoding are cloned, the pixels are not).
+        pub fn view(&self) -> ImageView<'_> {
+            ImageView {
+                header: self.header.clone(),
+                height: self.height,
+                width: self.width,
+                encoding: self.encoding.clone(),
+                is_bigendian: self.is_bigendian,
+                step: self.step,
+                data: &self.data,
+            }
+        }
+    }
+
+    impl CompressedImage {
+        /// A borrowed view (the header and format are cloned, the bytes are not).
+        pub fn view(&self) -> CompressedImageView<'_> {
+            CompressedImageView {
+                header: self.header.clone(),
+                format: self.format.clone(),
+                data: &self.data,
+            }
+        }
+    }
 }
 
 /// `geometry_msgs`.
@@ -280,6 +339,105 @@ pub mod vision_msgs {
         pub detections: Vec<Detection2D>,
     }
     ros_type!(Detection2DArray, "vision_msgs", "Detection2DArray");
+}
+
+/// `foxglove_msgs` (the ROS 2 package of the Foxglove schemas): image annotations drawn
+/// over a camera image in Foxglove's Image panel.
+pub mod foxglove_msgs {
+    use super::*;
+    /// `foxglove_msgs/Point2`: pixels, origin at the top-left corner of the top-left pixel.
+    #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+    pub struct Point2 {
+        /// x.
+        pub x: f64,
+        /// y.
+        pub y: f64,
+    }
+    /// `foxglove_msgs/Color`: RGBA, each in `[0, 1]`.
+    #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+    pub struct Color {
+        /// Red.
+        pub r: f64,
+        /// Green.
+        pub g: f64,
+        /// Blue.
+        pub b: f64,
+        /// Alpha.
+        pub a: f64,
+    }
+    /// `foxglove_msgs/CircleAnnotation`.
+    #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+    pub struct CircleAnnotation {
+        /// Stamp of the image it belongs to.
+        pub timestamp: builtin_interfaces::Time,
+        /// Centre.
+        pub position: Point2,
+        /// Diameter, pixels.
+        pub diameter: f64,
+        /// Line thickness, pixels.
+        pub thickness: f64,
+        /// Fill.
+        pub fill_color: Color,
+        /// Outline.
+        pub outline_color: Color,
+    }
+    /// `foxglove_msgs/PointsAnnotation`.
+    #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+    pub struct PointsAnnotation {
+        /// Stamp of the image it belongs to.
+        pub timestamp: builtin_interfaces::Time,
+        /// One of the `POINTS`, `LINE_LOOP`, ... constants.
+        pub r#type: u8,
+        /// Points, pixels.
+        pub points: Vec<Point2>,
+        /// Outline colour.
+        pub outline_color: Color,
+        /// Per-point outline colours (empty: `outline_color`).
+        pub outline_colors: Vec<Color>,
+        /// Fill colour.
+        pub fill_color: Color,
+        /// Line thickness, pixels.
+        pub thickness: f64,
+    }
+    impl PointsAnnotation {
+        /// Unknown.
+        pub const UNKNOWN: u8 = 0;
+        /// Individual points.
+        pub const POINTS: u8 = 1;
+        /// A closed polygon.
+        pub const LINE_LOOP: u8 = 2;
+        /// An open polyline.
+        pub const LINE_STRIP: u8 = 3;
+        /// Independent segments.
+        pub const LINE_LIST: u8 = 4;
+    }
+    /// `foxglove_msgs/TextAnnotation`.
+    #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+    pub struct TextAnnotation {
+        /// Stamp of the image it belongs to.
+        pub timestamp: builtin_interfaces::Time,
+        /// Bottom-left of the text, pixels.
+        pub position: Point2,
+        /// The text.
+        pub text: String,
+        /// Font size, pixels.
+        pub font_size: f64,
+        /// Text colour.
+        pub text_color: Color,
+        /// Background colour.
+        pub background_color: Color,
+    }
+    /// `foxglove_msgs/ImageAnnotations`.
+    #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+    pub struct ImageAnnotations {
+        /// Circles.
+        pub circles: Vec<CircleAnnotation>,
+        /// Points, polygons and lines.
+        pub points: Vec<PointsAnnotation>,
+        /// Texts.
+        pub texts: Vec<TextAnnotation>,
+    }
+    ros_type!(ImageAnnotations, "foxglove_msgs", "ImageAnnotations");
 }
 
 /// `diagnostic_msgs`.

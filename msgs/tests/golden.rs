@@ -184,3 +184,83 @@ fn a_truncated_image_is_an_error_not_a_panic_or_a_huge_allocation() {
         assert!(cdr_encoding::from_bytes::<sensor_msgs::Image, LittleEndian>(&bad[..cut]).is_err());
     }
 }
+
+#[test]
+fn foxglove_image_annotations_match_the_reference_cdr() {
+    use foxglove_msgs::*;
+    let stamp = header().stamp;
+    let green = Color {
+        r: 0.0,
+        g: 1.0,
+        b: 0.25,
+        a: 1.0,
+    };
+    let clear = Color::default();
+    let p = |x, y| Point2 { x, y };
+    check(
+        "image_annotations",
+        &ImageAnnotations {
+            circles: vec![CircleAnnotation {
+                timestamp: stamp,
+                position: p(120.5, 65.25),
+                diameter: 4.0,
+                thickness: 1.5,
+                fill_color: green,
+                outline_color: clear,
+            }],
+            points: vec![PointsAnnotation {
+                timestamp: stamp,
+                r#type: PointsAnnotation::LINE_LOOP,
+                points: vec![
+                    p(100.5, 50.25),
+                    p(140.5, 50.25),
+                    p(140.5, 80.25),
+                    p(100.5, 80.25),
+                ],
+                outline_color: green,
+                outline_colors: vec![],
+                fill_color: clear,
+                thickness: 2.0,
+            }],
+            texts: vec![TextAnnotation {
+                timestamp: stamp,
+                position: p(100.5, 48.0),
+                text: "track 7 0.88".into(),
+                font_size: 14.0,
+                text_color: green,
+                background_color: clear,
+            }],
+        },
+    );
+}
+
+#[test]
+fn image_views_borrow_the_reference_bytes() {
+    let dir = format!("{}/tests/golden", env!("CARGO_MANIFEST_DIR"));
+    let raw = std::fs::read(format!("{dir}/image.cdr")).unwrap();
+    let (owned, _) =
+        cdr_encoding::from_bytes::<sensor_msgs::Image, LittleEndian>(&raw[4..]).unwrap();
+    let (view, _) =
+        cdr_encoding::from_bytes::<sensor_msgs::ImageView, LittleEndian>(&raw[4..]).unwrap();
+    assert_eq!(view, owned.view());
+    // The pixels are the serialised bytes themselves, not a copy.
+    let inside = raw.as_ptr_range();
+    assert!(inside.contains(&view.data.as_ptr()));
+    assert_eq!(view.data, &(0..18).collect::<Vec<u8>>()[..]);
+
+    let raw = std::fs::read(format!("{dir}/compressed_image.cdr")).unwrap();
+    let (owned, _) =
+        cdr_encoding::from_bytes::<sensor_msgs::CompressedImage, LittleEndian>(&raw[4..]).unwrap();
+    let (view, _) =
+        cdr_encoding::from_bytes::<sensor_msgs::CompressedImageView, LittleEndian>(&raw[4..])
+            .unwrap();
+    assert_eq!(view, owned.view());
+    assert!(raw.as_ptr_range().contains(&view.data.as_ptr()));
+    // A view of a truncated message is an error, as for the owned type.
+    assert!(
+        cdr_encoding::from_bytes::<sensor_msgs::CompressedImageView, LittleEndian>(
+            &raw[4..raw.len() - 1]
+        )
+        .is_err()
+    );
+}
