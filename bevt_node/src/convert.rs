@@ -12,7 +12,7 @@
 use bevt_core::image::MAX_FRAME_SIDE;
 use bevt_core::{BBox, Frame, PixelFormat, TrackOutput, TrackState};
 use bevt_msgs::geometry_msgs::PoseWithCovariance;
-use bevt_msgs::sensor_msgs::{CompressedImage, Image};
+use bevt_msgs::sensor_msgs::{CompressedImage, CompressedImageView, Image, ImageView};
 use bevt_msgs::std_msgs::Header;
 use bevt_msgs::vision_msgs::{
     BoundingBox2D, Detection2D, Detection2DArray, ObjectHypothesis, ObjectHypothesisWithPose,
@@ -205,6 +205,19 @@ pub fn frame_from_image<'a>(
     buf: &'a mut PixelBuffer,
     limits: &ImageLimits,
 ) -> Result<Frame<'a>, ConvertError> {
+    frame_from_image_view(&msg.view(), buf, limits)
+}
+
+/// [`frame_from_image`] of a borrowed message (e.g. deserialised in place from a bag):
+/// the pixels are used where they lie when the encoding allows.
+///
+/// # Errors
+/// As [`frame_from_image`].
+pub fn frame_from_image_view<'a>(
+    msg: &ImageView<'a>,
+    buf: &'a mut PixelBuffer,
+    limits: &ImageLimits,
+) -> Result<Frame<'a>, ConvertError> {
     let (w, h) = limits.check(msg.width, msg.height)?;
     let enc = msg.encoding.to_ascii_lowercase();
     let step = msg.step as usize;
@@ -226,7 +239,7 @@ pub fn frame_from_image<'a>(
         _ => None,
     };
     if let Some(fmt) = direct {
-        return Frame::new(&msg.data, w, h, step, fmt)
+        return Frame::new(msg.data, w, h, step, fmt)
             .map_err(|e| ConvertError::Malformed(e.to_string()));
     }
     let Some(order) = yuv422_order(&enc) else {
@@ -282,6 +295,18 @@ pub fn frame_from_compressed<'a>(
     buf: &'a mut PixelBuffer,
     limits: &ImageLimits,
 ) -> Result<Frame<'a>, ConvertError> {
+    frame_from_compressed_view(&msg.view(), buf, limits)
+}
+
+/// [`frame_from_compressed`] of a borrowed message (e.g. deserialised in place from a bag).
+///
+/// # Errors
+/// As [`frame_from_compressed`].
+pub fn frame_from_compressed_view<'a>(
+    msg: &CompressedImageView<'_>,
+    buf: &'a mut PixelBuffer,
+    limits: &ImageLimits,
+) -> Result<Frame<'a>, ConvertError> {
     let fmt = msg.format.to_ascii_lowercase();
     let kind = if fmt.contains("jpeg") || fmt.contains("jpg") {
         image::ImageFormat::Jpeg
@@ -297,12 +322,12 @@ pub fn frame_from_compressed<'a>(
     // 1. The header alone: dimensions, with only a small allocation allowed.
     let mut header_limits = image::Limits::default();
     header_limits.max_alloc = Some(HEADER_ALLOC_BYTES);
-    let mut reader = image::ImageReader::with_format(std::io::Cursor::new(&msg.data), kind);
+    let mut reader = image::ImageReader::with_format(std::io::Cursor::new(msg.data), kind);
     reader.limits(header_limits);
     let (width, height) = reader.into_dimensions().map_err(|e| err(&e))?;
     let (w, h) = limits.check(width, height)?;
     // 2. A truncated stream is an error, not a partly grey frame.
-    if !is_complete(kind, &msg.data) {
+    if !is_complete(kind, msg.data) {
         return Err(ConvertError::Decode {
             format: clip(&msg.format),
             reason: format!(
@@ -321,7 +346,7 @@ pub fn frame_from_compressed<'a>(
     decode_limits.max_image_width = Some(limits.max_width);
     decode_limits.max_image_height = Some(limits.max_height);
     decode_limits.max_alloc = Some(limits.decode_bytes());
-    let mut reader = image::ImageReader::with_format(std::io::Cursor::new(&msg.data), kind);
+    let mut reader = image::ImageReader::with_format(std::io::Cursor::new(msg.data), kind);
     reader.limits(decode_limits);
     let img = reader.decode().map_err(|e| err(&e))?;
     if (img.width(), img.height()) != (width, height) {

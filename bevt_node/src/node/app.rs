@@ -17,7 +17,8 @@
 //! admitted request per camera frame, answering the others at once with the reason.
 
 use crate::convert::{
-    clip, detections_from_output, frame_from_compressed, frame_from_image, ImageLimits, PixelBuffer,
+    clip, detections_from_output, frame_from_compressed, frame_from_compressed_view,
+    frame_from_image, frame_from_image_view, ImageLimits, PixelBuffer,
 };
 use bevt_core::{
     BBox, BevtTracker, Frame, PixelFormat, TrackOutput, TrackState, Tracker, TrackerSpec,
@@ -25,7 +26,7 @@ use bevt_core::{
 use bevt_msgs::bevt::{ReinitRequest, ReinitResponse, TrackStatus};
 use bevt_msgs::builtin_interfaces::Time;
 use bevt_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
-use bevt_msgs::sensor_msgs::{CompressedImage, Image};
+use bevt_msgs::sensor_msgs::{CompressedImage, CompressedImageView, Image, ImageView};
 use bevt_msgs::std_msgs::Header;
 use bevt_msgs::std_srvs::TriggerResponse;
 use bevt_msgs::vision_msgs::Detection2DArray;
@@ -140,6 +141,10 @@ pub enum CameraMsg<'a> {
     Raw(&'a Image),
     /// `sensor_msgs/CompressedImage`.
     Compressed(&'a CompressedImage),
+    /// `sensor_msgs/Image` borrowed from a serialised message (`bevt replay`).
+    RawView(&'a ImageView<'a>),
+    /// `sensor_msgs/CompressedImage` borrowed from a serialised message (`bevt replay`).
+    CompressedView(&'a CompressedImageView<'a>),
 }
 
 impl CameraMsg<'_> {
@@ -147,6 +152,8 @@ impl CameraMsg<'_> {
         match self {
             CameraMsg::Raw(m) => &m.header,
             CameraMsg::Compressed(m) => &m.header,
+            CameraMsg::RawView(m) => &m.header,
+            CameraMsg::CompressedView(m) => &m.header,
         }
     }
 }
@@ -360,6 +367,10 @@ impl NodeCore {
         let conv = match msg {
             CameraMsg::Raw(m) => frame_from_image(m, &mut self.pixels, &limits),
             CameraMsg::Compressed(m) => frame_from_compressed(m, &mut self.pixels, &limits),
+            CameraMsg::RawView(m) => frame_from_image_view(m, &mut self.pixels, &limits),
+            CameraMsg::CompressedView(m) => {
+                frame_from_compressed_view(m, &mut self.pixels, &limits)
+            }
         };
         let frame = match conv {
             Ok(f) => f,
