@@ -12,6 +12,7 @@ mod lost;
 mod node;
 mod node_limits;
 mod real_data;
+mod replay;
 mod ros_tools;
 mod synthetic;
 mod tool;

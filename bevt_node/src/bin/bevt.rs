@@ -3,16 +3,22 @@
 //! - `bevt demo`: track a synthetic sequence generated in memory (no files needed).
 //! - `bevt eval`: one-pass evaluation on a UAV123-style dataset, with plots and comparisons.
 //! - `bevt track`: track through a folder of frames from an initial box.
+//! - `bevt replay`: replay a recorded camera topic (rosbag2) through the node logic, MCAP out.
 
 use anyhow::{bail, Context, Result};
 use bevt_core::eval::metrics::score_sequence;
 use bevt_core::eval::synth::SynthParams;
 use bevt_core::{BBox, BevtTracker, Frame, PixelFormat, Tracker};
+use bevt_node::node::node_params::launch_from_args;
 use bevt_node::params::load_config;
 use bevt_node::tool::dataset::{
     format_annotation_row, image_files, open_dataset, parse_annotation,
 };
 use bevt_node::tool::plots::{plot_curves, Curve};
+use bevt_node::tool::replay::{
+    decode_only, parse_box as parse_replay_box, parse_reinit_file, parse_time_ns, InitAt,
+    ReplayOptions, ReplaySummary,
+};
 use bevt_node::tool::report::{
     build_summary, console_table, summarize_run, write_result_file, write_summary,
 };
@@ -104,6 +110,49 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Replay a recorded camera topic (rosbag2 directory, .mcap or .db3) through the node
+    /// logic and write the track as MCAP (Foxglove) and CSV.
+    Replay(ReplayArgs),
+}
+
+#[derive(Args)]
+struct ReplayArgs {
+    #[command(flatten)]
+    cfg: ConfigArgs,
+    /// Bag directory (metadata.yaml + .mcap or .db3), or a bare .mcap / .db3 file.
+    #[arg(long)]
+    bag: PathBuf,
+    /// Image topic (sensor_msgs/msg/Image or sensor_msgs/msg/CompressedImage).
+    #[arg(long)]
+    topic: String,
+    /// Initial box `x,y,w,h`, image pixels from 0 (as the node's reinit service).
+    #[arg(long)]
+    init: String,
+    /// Apply the initial box on the N-th message of the topic (from 0; default 0).
+    #[arg(long, value_name = "N", conflicts_with = "init_time")]
+    init_frame: Option<u64>,
+    /// Apply the initial box on the first frame stamped at or after T (seconds).
+    #[arg(long, value_name = "T")]
+    init_time: Option<String>,
+    /// Output MCAP: /detections, /track_status, /track_annotations.
+    #[arg(long)]
+    out: PathBuf,
+    /// Also write `stamp,x,y,w,h,score,state` per frame.
+    #[arg(long)]
+    csv: Option<PathBuf>,
+    /// Re-initialisations to serve: `stamp,x,y,w,h[,at]` per line (seconds; stamp = the
+    /// frame the box was drawn on, 0 = newest; at = when it reached the node, default stamp).
+    #[arg(long, value_name = "FILE")]
+    reinit_file: Option<PathBuf>,
+    /// Copy the image topic into the output, so one file opens in Foxglove over the video.
+    #[arg(long)]
+    copy_images: bool,
+    /// Node parameters file (`--params-file` format) for image limits and the ring buffer.
+    #[arg(long, value_name = "FILE")]
+    params_file: Option<PathBuf>,
+    /// Only read and decode the frames (no tracking, no output): prints the throughput.
+    #[arg(long)]
+    decode_only: bool,
 }
 
 /// Smallest and largest side of a demo frame, pixels (a frame is generated in memory).
@@ -422,6 +471,104 @@ fn run(cli: Cli) -> Result<ExitCode> {
             init,
             out,
         } => track(cfg, images, init, out.as_deref()),
+        Cmd::Replay(a) => replay(a),
+    }
+}
+
+fn print_replay_summary(s: &ReplaySummary) {
+    let states: Vec<String> = s.states.iter().map(|(k, v)| format!("{k} {v}")).collect();
+    println!(
+        "replay: {} messages, {} frames in {:.2} s ({:.1} frames/s); states: {}",
+        s.messages,
+        s.frames,
+        s.seconds,
+        s.frames as f64 / s.seconds.max(1e-9),
+        if states.is_empty() {
+            "none".into()
+        } else {
+            states.join(", ")
+        }
+    );
+    for (reason, n) in &s.skipped {
+        println!("  skipped or unusable: {n} x {reason}");
+    }
+    if s.reinit_applied > 0 || !s.reinit_refused.is_empty() {
+        println!(
+            "  re-initialisations: {} applied, {} refused",
+            s.reinit_applied,
+            s.reinit_refused.len()
+        );
+    }
+    for r in &s.reinit_refused {
+        println!("    refused: {r}");
+    }
+}
+
+fn replay(a: &ReplayArgs) -> Result<ExitCode> {
+    let launch = match &a.params_file {
+        Some(p) => launch_from_args(
+            &[
+                "--ros-args".to_string(),
+                "--params-file".to_string(),
+                p.display().to_string(),
+            ],
+            |_| None,
+        )?,
+        None => launch_from_args(&[], |_| None)?,
+    };
+    if a.decode_only {
+        let (n, s) = decode_only(&a.bag, &a.topic, &launch.node)?;
+        println!(
+            "replay --decode-only: {n} of {} messages read and decoded in {:.3} s ({:.1} frames/s)",
+            s.messages,
+            s.seconds,
+            n as f64 / s.seconds.max(1e-9)
+        );
+        for (reason, k) in &s.skipped {
+            println!("  unusable: {k} x {reason}");
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
+    let init_at = match (&a.init_time, a.init_frame) {
+        (Some(t), _) => InitAt::Time(parse_time_ns(t).map_err(anyhow::Error::msg)?),
+        (None, n) => InitAt::Frame(n.unwrap_or(0)),
+    };
+    let reinit = match &a.reinit_file {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("cannot read {}", p.display()))?;
+            parse_reinit_file(&text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?
+        }
+        None => Vec::new(),
+    };
+    let opts = ReplayOptions {
+        bag: a.bag.clone(),
+        topic: a.topic.clone(),
+        init: parse_replay_box(&a.init).map_err(|e| anyhow::anyhow!("--init {e}"))?,
+        init_at,
+        tracker: spec_of(&a.cfg)?,
+        node: launch.node,
+        out: a.out.clone(),
+        csv: a.csv.clone(),
+        reinit,
+        copy_images: a.copy_images,
+    };
+    let pool = pool(opts.tracker.config.threads)?;
+    match pool.install(|| bevt_node::tool::replay::replay(&opts, true)) {
+        Ok(s) => {
+            print_replay_summary(&s);
+            println!("wrote {}", opts.out.display());
+            Ok(ExitCode::SUCCESS)
+        }
+        Err(e) => {
+            print_replay_summary(&e.summary);
+            eprintln!(
+                "error: {}\n(the output written so far is kept: {})",
+                e.reason,
+                opts.out.display()
+            );
+            Ok(ExitCode::FAILURE)
+        }
     }
 }
 
