@@ -36,6 +36,10 @@ fn main() -> ExitCode {
         eprintln!("bevt_node_under_test: cannot watch stdin: {e}");
         return ExitCode::FAILURE;
     }
+    eprintln!(
+        "bevt_node_under_test: {}",
+        launch.ros.security.startup_line(launch.ros.domain_id)
+    );
     let core = NodeCore::new(launch.tracker.clone(), launch.node.clone());
     match ros::run(core, &launch.ros, stop, |_| {}) {
         Ok(()) => ExitCode::SUCCESS,

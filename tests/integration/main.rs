@@ -14,5 +14,6 @@ mod node_limits;
 mod real_data;
 mod replay;
 mod ros_tools;
+mod security;
 mod synthetic;
 mod tool;

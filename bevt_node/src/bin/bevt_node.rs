@@ -136,6 +136,10 @@ fn run() -> Result<()> {
     let s = stop.clone();
     ctrlc::set_handler(move || s.store(true, Ordering::Relaxed))
         .context("cannot install the SIGINT/SIGTERM handler")?;
+    eprintln!(
+        "bevt_node: {}",
+        launch.ros.security.startup_line(launch.ros.domain_id)
+    );
     if launch.demo {
         return demo(launch, stop);
     }

@@ -5,4 +5,5 @@ pub mod app;
 pub mod node_params;
 pub mod param_services;
 pub mod ros;
+pub mod security;
 pub mod sim;

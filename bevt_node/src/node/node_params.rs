@@ -2,7 +2,9 @@
 //! (`--ros-args --params-file FILE -p name:=value -r from:=to -r __ns:=/ns -r __node:=name`),
 //! the standard parameters-file format (`bevt_node: ros__parameters: {...}` or `/**:`), and
 //! the `ROS_DOMAIN_ID` / `ROS_LOCALHOST_ONLY` environment variables (which ros2-client
-//! itself ignores).
+//! itself ignores), and DDS Security as ROS 2 configures it (`--enclave`/`-e`,
+//! `ROS_SECURITY_ENABLE`, `ROS_SECURITY_STRATEGY`, `ROS_SECURITY_KEYSTORE`,
+//! `ROS_SECURITY_ENCLAVE_OVERRIDE`; see [`crate::node::security`]).
 //!
 //! Parameters (see `config/node.yaml`, where each one's range is given): `domain_id`,
 //! `network_interfaces` (IPv4 addresses the node listens and sends on; `["0.0.0.0"]` = all;
@@ -10,7 +12,9 @@
 //! (`enhanced` | `cyclone`), `max_image_width`, `max_image_height`, `max_image_pixels`,
 //! `reinit_buffer_frames`, `reinit_buffer_mb`, `reinit_max_fast_forward`,
 //! `reinit_rate_hz`, `reinit_burst`, `stale_timeout_s`, `diagnostics_period_s`,
-//! `debug_image_rate_hz` (0 = off), `class_id`, and every tracker key as
+//! `debug_image_rate_hz` (0 = off), `class_id`, `security_keystore` (a keystore path:
+//! security on, strategy Enforce), `security_enclave` (default `/`; `--enclave` wins), and
+//! every tracker key as
 //! `tracker.<section>.<key>` (as in `config/bevt.yaml`, ranges in
 //! `TrackerConfig::validate`). Every number has a range that bounds the work and memory
 //! it implies ([`ranges`]); unknown parameters and values outside a range stop start-up
@@ -18,6 +22,7 @@
 
 use crate::node::app::NodeSettings;
 use crate::node::ros::RosSettings;
+use crate::node::security::{SecurityError, SecurityOptions, Strategy};
 use crate::params::load_config;
 use bevt_core::TrackerSpec;
 use ros2_client::ServiceMapping;
@@ -45,6 +50,9 @@ pub enum LaunchError {
     /// Tracker configuration error.
     #[error("tracker parameters: {0}")]
     Tracker(#[from] crate::params::ParamsError),
+    /// DDS Security is enforced but not usable.
+    #[error("{0}")]
+    Security(#[from] SecurityError),
 }
 
 /// Everything the node needs to start.
@@ -185,6 +193,8 @@ struct CommandLine {
     sets: Vec<(String, String)>,
     /// `-r from:=to`, in order.
     remaps: Vec<(String, String)>,
+    /// `--enclave PATH` (or `-e`).
+    enclave: Option<String>,
 }
 
 /// Splits the arguments into the node's own (`--demo`, `--duration`) and the
@@ -228,9 +238,7 @@ fn parse_command_line(args: &[String]) -> Result<CommandLine, LaunchError> {
             "--log-level" if ros => {
                 next("--log-level")?;
             }
-            "--enclave" if ros => {
-                next("--enclave")?;
-            }
+            "--enclave" | "-e" if ros => cl.enclave = Some(next("--enclave")?),
             other => return Err(LaunchError::Args(format!("unknown argument {other:?}"))),
         }
     }
@@ -273,6 +281,34 @@ fn apply_env(
     }
     if env("ROS_LOCALHOST_ONLY").as_deref() == Some("1") {
         ros_settings.networks = vec![IpAddr::from([127, 0, 0, 1])];
+    }
+    Ok(())
+}
+
+/// Takes the `security_keystore` and `security_enclave` parameters out of `params`: a
+/// keystore named in the configuration turns security on with strategy Enforce.
+fn apply_security_params(
+    params: &mut BTreeMap<String, Value>,
+    security: &mut SecurityOptions,
+) -> Result<(), LaunchError> {
+    let mut text = |k: &str| -> Result<Option<String>, LaunchError> {
+        params
+            .remove(k)
+            .map(|v| {
+                v.as_str()
+                    .filter(|s| !s.is_empty())
+                    .map(str::to_string)
+                    .ok_or_else(|| param_err(k, "expected a non-empty path"))
+            })
+            .transpose()
+    };
+    if let Some(ks) = text("security_keystore")? {
+        security.enable = true;
+        security.strategy = Strategy::Enforce;
+        security.keystore = Some(ks.into());
+    }
+    if let Some(e) = text("security_enclave")? {
+        security.enclave = e;
     }
     Ok(())
 }
@@ -448,8 +484,13 @@ pub fn launch_from_args(
     }
     ros_settings.remaps = topic_remaps;
     node.node_name = ros_settings.node_name.clone();
-    let params = collect_params(&cl.files, cl.sets, &ros_settings.node_name)?;
+    let mut params = collect_params(&cl.files, cl.sets, &ros_settings.node_name)?;
     // Environment first, parameters override it.
+    let mut security = SecurityOptions::from_env(&env, None);
+    apply_security_params(&mut params, &mut security)?;
+    if let Some(e) = cl.enclave {
+        security.enclave = e;
+    }
     apply_env(env, &mut ros_settings)?;
     let mut tracker_sets = Vec::new();
     for (k, v) in &params {
@@ -457,6 +498,14 @@ pub fn launch_from_args(
     }
     check_size_limits(&ros_settings, &node)?;
     let tracker = load_config(None, &tracker_sets)?;
+    if cl.demo && security.enable {
+        return Err(LaunchError::Args(
+            "--demo runs unsecured (its in-process camera and ground station have no DDS \
+             identities): unset ROS_SECURITY_ENABLE and security_keystore"
+                .into(),
+        ));
+    }
+    ros_settings.security = security.resolve()?;
     Ok(Launch {
         ros: ros_settings,
         node,
@@ -472,6 +521,45 @@ mod tests {
 
     fn args(s: &str) -> Vec<String> {
         s.split_whitespace().map(String::from).collect()
+    }
+
+    #[test]
+    fn enclave_argument_security_parameters_and_environment_are_applied() {
+        use crate::node::security::DdsSecurity;
+        // Off by default, with the reason for the warning.
+        let l = launch_from_args(&[], |_| None).unwrap();
+        assert!(matches!(l.ros.security, DdsSecurity::Off { .. }));
+        // `--enclave` and `-e` are ROS arguments only.
+        assert!(matches!(
+            launch_from_args(&args("--enclave /bevt_node"), |_| None),
+            Err(LaunchError::Args(_))
+        ));
+        let enforce = |k: &str| match k {
+            "ROS_SECURITY_ENABLE" => Some("true".to_string()),
+            "ROS_SECURITY_STRATEGY" => Some("Enforce".to_string()),
+            _ => None,
+        };
+        let e = launch_from_args(&args("--ros-args --enclave /bevt_node"), enforce).unwrap_err();
+        assert!(e.to_string().contains("SECURITY ERROR"), "{e}");
+        // The parameter names the keystore: security on, Enforce, even without the variables;
+        // `-e` picks the enclave over `security_enclave`.
+        let e = launch_from_args(
+            &args("--ros-args -p security_keystore:=/nonexistent -p security_enclave:=/x -e /bevt_node"),
+            |_| None,
+        )
+        .unwrap_err();
+        let want = if cfg!(feature = "security") {
+            "/nonexistent/enclaves/bevt_node"
+        } else {
+            "without the `security` cargo feature"
+        };
+        assert!(e.to_string().contains(want), "{e}");
+        assert!(launch_from_args(&args("--ros-args -p security_keystore:=3"), |_| None).is_err());
+        // The demo has no identities.
+        assert!(matches!(
+            launch_from_args(&args("--demo"), enforce),
+            Err(LaunchError::Args(_))
+        ));
     }
 
     #[test]

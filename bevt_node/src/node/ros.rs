@@ -13,6 +13,7 @@
 
 use crate::node::app::{CameraMsg, FrameOutputs, NodeCore};
 use crate::node::param_services::{Change, NodeParams, ParamServers};
+use crate::node::security::DdsSecurity;
 use bevt_msgs::bevt::{ReinitRequest, ReinitResponse, TrackStatus};
 use bevt_msgs::diagnostic_msgs::DiagnosticArray;
 use bevt_msgs::sensor_msgs::{CompressedImage, Image};
@@ -129,6 +130,9 @@ pub struct RosSettings {
     pub diagnostics_period: Duration,
     /// `debug_image` rate, Hz (0 = not published).
     pub debug_image_rate_hz: f64,
+    /// DDS Security: off, or the enclave whose files secure the participant
+    /// ([`crate::node::security`]).
+    pub security: DdsSecurity,
 }
 
 impl Default for RosSettings {
@@ -143,6 +147,7 @@ impl Default for RosSettings {
             remaps: Vec::new(),
             diagnostics_period: Duration::from_secs(1),
             debug_image_rate_hz: 0.0,
+            security: DdsSecurity::default(),
         }
     }
 }
@@ -191,11 +196,32 @@ pub fn context(settings: &RosSettings) -> Result<Context, RosError> {
         });
     }
     // Discovery samples are small: RustDDS's built-in limits stay.
-    let b = DomainParticipantBuilder::new(settings.domain_id)
+    #[cfg_attr(not(feature = "security"), allow(unused_mut))]
+    let mut b = DomainParticipantBuilder::new(settings.domain_id)
         .with_only_networks(settings.networks.clone())
         .fragment_limits(FragmentLimits::with_max_sample_size(
             settings.max_sample_bytes,
         ));
+    if let DdsSecurity::Enclave(dir) = &settings.security {
+        #[cfg(feature = "security")]
+        {
+            // RustDDS's built-in authentication (PKI-DH), access control (permissions and
+            // governance) and cryptographic (AES-GCM-GMAC) plugins, from the enclave's files
+            // under the names `ros2 security` gives them. The keys are unencrypted PEM, as
+            // sros2 writes them, so there is no password.
+            b = b.builtin_security(
+                ros2_client::dds::rustdds::DomainParticipantSecurityConfigFiles::with_ros_default_names(
+                    dir,
+                    String::new(),
+                ),
+            );
+        }
+        #[cfg(not(feature = "security"))]
+        return Err(RosError::Create {
+            what: format!("secured DDS participant (enclave {})", dir.display()),
+            reason: "this build has no DDS Security (cargo feature `security`)".into(),
+        });
+    }
     let dp = b.build().map_err(|e| RosError::Create {
         what: format!("DDS participant on domain {}", settings.domain_id),
         reason: format!("{e:?}"),

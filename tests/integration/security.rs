@@ -1,0 +1,558 @@
+//! DDS Security (issue 11): the node secured with an SROS2 keystore made by
+//! `scripts/make-keystore.sh` accepts commands only from the authorised ground station.
+//!
+//! One secured session (the handshakes take seconds) runs, on loopback: the node (enclave
+//! `/bevt_node`), a camera (`/camera`), the authorised ground station (`/ground_station`),
+//! and three would-be commanders aiming `reinit`, `init` and `stop` at a decoy box:
+//! an unauthenticated participant (no security, as the red team's Cyclone peer was), the
+//! `/observer` identity with its genuine permissions (read-only: its own DDS refuses to
+//! create command writers), and the `/observer` identity with a permissions document it
+//! signed itself with a CA of its own (so its DDS does create them). The node must answer
+//! none of them and keep tracking the target, then obey the ground station's `stop` and
+//! `init`. The start-up policy (`ROS_SECURITY_*`, `--enclave`) is tested on the node's
+//! process (`bevt_node_under_test`).
+
+use bevt_core::eval::synth::SynthParams;
+use bevt_core::{BBox, TrackerConfig};
+use bevt_msgs::bevt::{ReinitRequest, ReinitResponse, TrackStatus};
+use bevt_msgs::builtin_interfaces::Time;
+use bevt_msgs::std_srvs::{TriggerRequest, TriggerResponse};
+use bevt_msgs::vision_msgs::{BoundingBox2D, Detection2D, Point2D, Pose2D};
+use bevt_node::convert::{bbox_from_detection, reinit_request};
+use bevt_node::node::app::{NodeCore, NodeSettings};
+use bevt_node::node::ros::{context, names, output_qos, ros_name, run, service_qos, RosSettings};
+use bevt_node::node::security::DdsSecurity;
+use bevt_node::node::sim::{spawn_camera, GroundStation, TruthLog};
+use bevt_tests::{temp_dir, wait_status};
+use ros2_client::{Client, MessageTypeName, NodeName, NodeOptions, Publisher, ServiceTypeName};
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// Domains of these tests (the other modules use 1..=94 and 100..=229).
+fn domain(k: u16) -> u16 {
+    95 + k
+}
+
+/// How long each would-be commander keeps trying: longer than discovery and the
+/// ground station's own first successful `reinit` took (measured ~2 s with security).
+const ATTACK_WINDOW: Duration = Duration::from_secs(6);
+/// Tracking tolerance, pixels (the synthetic target moves smoothly; the node tracks it
+/// within 1-2 px).
+const TOLERANCE_PX: f32 = 5.0;
+
+/// A keystore from `scripts/make-keystore.sh` (all domains), plus the forged enclave
+/// `/forged`: the observer's genuine identity with permissions granting itself every
+/// command, signed by a CA of its own (a second keystore's). `None` (with the reason
+/// printed) without openssl.
+fn keystore(name: &str) -> Option<PathBuf> {
+    if Command::new("openssl").arg("version").output().is_err() {
+        println!("security: SKIPPED, openssl not found (scripts/make-keystore.sh needs it)");
+        return None;
+    }
+    let dir = temp_dir(name);
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/make-keystore.sh");
+    let make = |out: &Path| {
+        let st = Command::new("bash")
+            .arg(&script)
+            .arg(out)
+            .args(["--domain", "0-232"])
+            .status()
+            .unwrap();
+        assert!(st.success(), "make-keystore.sh {} failed", out.display());
+    };
+    let (ks, rogue) = (dir.join("keystore"), dir.join("rogue"));
+    make(&ks);
+    make(&rogue);
+    let forged = ks.join("enclaves/forged");
+    std::fs::create_dir_all(&forged).unwrap();
+    for f in ["cert.pem", "key.pem", "identity_ca.cert.pem"] {
+        std::fs::copy(ks.join("enclaves/observer").join(f), forged.join(f)).unwrap();
+    }
+    std::fs::copy(
+        rogue.join("public/ca.cert.pem"),
+        forged.join("permissions_ca.cert.pem"),
+    )
+    .unwrap();
+    std::fs::copy(
+        rogue.join("enclaves/governance.p7s"),
+        forged.join("governance.p7s"),
+    )
+    .unwrap();
+    let granted = std::fs::read_to_string(rogue.join("enclaves/ground_station/permissions.xml"))
+        .unwrap()
+        .replace("/ground_station", "/observer");
+    std::fs::write(forged.join("permissions.xml"), granted).unwrap();
+    let st = Command::new("openssl")
+        .args(["smime", "-sign", "-text", "-in"])
+        .arg(forged.join("permissions.xml"))
+        .arg("-out")
+        .arg(forged.join("permissions.p7s"))
+        .arg("-signer")
+        .arg(rogue.join("public/ca.cert.pem"))
+        .arg("-inkey")
+        .arg(rogue.join("private/ca.key.pem"))
+        .status()
+        .unwrap();
+    assert!(st.success(), "signing the forged permissions failed");
+    Some(ks)
+}
+
+/// ROS settings of a participant on `domain` with `enclave` of `ks` (`None`: unsecured).
+fn settings(domain: u16, ks: &Path, enclave: Option<&str>) -> RosSettings {
+    RosSettings {
+        domain_id: domain,
+        security: match enclave {
+            Some(e) => DdsSecurity::Enclave(ks.join("enclaves").join(e)),
+            None => DdsSecurity::default(),
+        },
+        ..RosSettings::default()
+    }
+}
+
+/// A participant that can command the node: `reinit` and `stop` clients, an `init` writer.
+struct Commander {
+    _ctx: ros2_client::Context,
+    _node: ros2_client::Node,
+    reinit: Client<ReinitRequest, ReinitResponse>,
+    stop: Client<TriggerRequest, TriggerResponse>,
+    init: Publisher<Detection2D>,
+}
+
+impl Commander {
+    fn new(s: &RosSettings) -> Result<Self, String> {
+        let e = |e: ros2_client::CreateError| format!("{e:?}");
+        let ctx = context(s).map_err(|e| e.to_string())?;
+        let mut node = ctx
+            .new_node(
+                NodeName::new("/", "commander").map_err(|e| format!("{e:?}"))?,
+                NodeOptions::new(),
+            )
+            .map_err(|e| format!("{e:?}"))?;
+        let name = |n: &str| ros_name(s, n).map_err(|e| e.to_string());
+        let reinit = node
+            .create_client(
+                s.service_mapping,
+                &name(names::REINIT)?,
+                &ServiceTypeName::new("bevt_msgs", "Reinit"),
+                service_qos(),
+                service_qos(),
+            )
+            .map_err(e)?;
+        let stop = node
+            .create_client(
+                s.service_mapping,
+                &name(names::STOP)?,
+                &ServiceTypeName::new("std_srvs", "Trigger"),
+                service_qos(),
+                service_qos(),
+            )
+            .map_err(e)?;
+        let topic = node
+            .create_topic(
+                &name(names::INIT)?,
+                MessageTypeName::new("vision_msgs", "Detection2D"),
+                &output_qos(),
+            )
+            .map_err(e)?;
+        let init = node.create_publisher(&topic, None).map_err(e)?;
+        Ok(Self {
+            _ctx: ctx,
+            _node: node,
+            reinit,
+            stop,
+            init,
+        })
+    }
+
+    /// Sends `reinit(req)`, `init(det)` and `stop` every 200 ms for `window`; returns the
+    /// replies received (reinit, stop).
+    fn attack(&self, req: &ReinitRequest, det: &Detection2D, window: Duration) -> (usize, usize) {
+        let end = Instant::now() + window;
+        let (mut reinit, mut stop) = (0, 0);
+        while Instant::now() < end {
+            let _ = self.reinit.send_request(req.clone());
+            let _ = self.stop.send_request(TriggerRequest::default());
+            let _ = self.init.publish(det.clone());
+            std::thread::sleep(Duration::from_millis(200));
+            while let Ok(Some(_)) = self.reinit.receive_response() {
+                reinit += 1;
+            }
+            while let Ok(Some(_)) = self.stop.receive_response() {
+                stop += 1;
+            }
+        }
+        (reinit, stop)
+    }
+
+    /// Calls `stop` until answered or `timeout`.
+    fn call_stop(&self, timeout: Duration) -> Option<TriggerResponse> {
+        let end = Instant::now() + timeout;
+        while Instant::now() < end {
+            let Ok(id) = self.stop.send_request(TriggerRequest::default()) else {
+                std::thread::sleep(Duration::from_millis(50));
+                continue;
+            };
+            let retry = Instant::now() + Duration::from_secs(2);
+            while Instant::now() < retry.min(end) {
+                match self.stop.receive_response() {
+                    Ok(Some((rid, r))) if rid == id => return Some(r),
+                    _ => std::thread::sleep(Duration::from_millis(5)),
+                }
+            }
+        }
+        None
+    }
+}
+
+/// A `vision_msgs/Detection2D` for the `init` topic: box `b` on the frame stamped `stamp`.
+fn detection(b: BBox, stamp: i64) -> Detection2D {
+    let c = b.center();
+    Detection2D {
+        header: bevt_msgs::std_msgs::Header {
+            stamp: Time::from_nanos(stamp),
+            frame_id: String::new(),
+        },
+        bbox: BoundingBox2D {
+            center: Pose2D {
+                position: Point2D {
+                    x: c.x as f64,
+                    y: c.y as f64,
+                },
+                theta: 0.0,
+            },
+            size_x: b.w as f64,
+            size_y: b.h as f64,
+        },
+        ..Detection2D::default()
+    }
+}
+
+/// The newest frame's (stamp, truth) once the camera has published for `warmup`.
+fn newest_truth(truth: &TruthLog, warmup: Duration) -> (i64, BBox) {
+    let end = Instant::now() + Duration::from_secs(15);
+    loop {
+        {
+            let log = truth.lock().unwrap();
+            if let (Some((&first, _)), Some((&last, &b))) =
+                (log.iter().next(), log.iter().next_back())
+            {
+                if last - first > warmup.as_nanos() as i64 {
+                    return (last, b);
+                }
+            }
+        }
+        assert!(Instant::now() < end, "the camera published nothing");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Detections received by `gs` for `dur`: (non-empty, within [`TOLERANCE_PX`] of the truth).
+fn collect(gs: &GroundStation, truth: &TruthLog, dur: Duration) -> (usize, usize) {
+    let end = Instant::now() + dur;
+    let (mut n, mut good) = (0, 0);
+    while Instant::now() < end {
+        for d in gs.take_detections() {
+            let Some(det) = d.detections.first() else {
+                continue;
+            };
+            n += 1;
+            let t = truth
+                .lock()
+                .unwrap()
+                .get(&d.header.stamp.as_nanos())
+                .copied();
+            if t.is_some_and(|t| {
+                bbox_from_detection(det).center().distance(&t.center()) < TOLERANCE_PX
+            }) {
+                good += 1;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    (n, good)
+}
+
+#[test]
+#[ignore = "RustDDS 0.15.1's security plugins deliver no user data between the secured node \
+            and the ground station (README, Secured mode: known failure); run with --ignored"]
+fn only_the_authorised_ground_station_commands_the_secured_node() {
+    let Some(ks) = keystore("sec_session") else {
+        return;
+    };
+    let d = domain(0);
+    let t0 = Instant::now();
+    let node_settings = settings(d, &ks, Some("bevt_node"));
+    let stop = Arc::new(AtomicBool::new(false));
+    let core = NodeCore::new(
+        TrackerConfig::default().validate().unwrap(),
+        NodeSettings {
+            // The ground station's calls below come back to back.
+            reinit_burst: 10,
+            ..NodeSettings::default()
+        },
+    );
+    let (s2, st2) = (node_settings.clone(), stop.clone());
+    let node = std::thread::Builder::new()
+        .name("bevt-node-secured".into())
+        .spawn(move || run(core, &s2, st2, |_| {}))
+        .unwrap();
+    let seq = SynthParams {
+        frames: 400,
+        ..SynthParams::default()
+    };
+    let (camera, truth) = spawn_camera(
+        &settings(d, &ks, Some("camera")),
+        seq.clone(),
+        20.0,
+        stop.clone(),
+    )
+    .unwrap();
+    let gs = GroundStation::new(&settings(d, &ks, Some("ground_station"))).unwrap();
+
+    // 1. The authorised ground station re-targets the node (service).
+    let (stamp, b) = newest_truth(&truth, Duration::from_millis(1500));
+    let resp = gs
+        .reinit(
+            &reinit_request(b, Time::from_nanos(stamp), ""),
+            Duration::from_secs(20),
+        )
+        .expect("the authorised reinit was answered");
+    assert!(resp.success, "{}", resp.message);
+    let first_reinit = t0.elapsed();
+    let (n, good) = collect(&gs, &truth, Duration::from_secs(2));
+    println!("security: authorised reinit answered {first_reinit:.1?} after start; then {good}/{n} detections within {TOLERANCE_PX} px");
+    assert!(
+        n >= 10 && good * 10 >= n * 9,
+        "{good}/{n} before the attacks"
+    );
+
+    // 2. Would-be commanders aim at a decoy box in the top-left corner.
+    let decoy = BBox::new(4.0, 4.0, 40.0, 32.0);
+    let observer = Commander::new(&settings(d, &ks, Some("observer")));
+    let why = observer.as_ref().err().cloned().unwrap_or_default();
+    assert!(
+        why.contains("security"),
+        "the observer's own DDS should refuse it command writers: {why}"
+    );
+    println!("security: /observer (genuine permissions) cannot create command writers: {why}");
+    assert!(
+        GroundStation::new(&settings(d, &ks, Some("observer"))).is_err(),
+        "the observer may not create a reinit client"
+    );
+    let attackers: Vec<(&str, Commander)> = vec![
+        (
+            "unauthenticated",
+            Commander::new(&settings(d, &ks, None)).unwrap(),
+        ),
+        (
+            "/observer with self-signed permissions",
+            Commander::new(&settings(d, &ks, Some("forged"))).unwrap(),
+        ),
+    ];
+    let (stamp, _) = newest_truth(&truth, Duration::ZERO);
+    let req = reinit_request(decoy, Time::from_nanos(stamp), "");
+    let det = detection(decoy, stamp);
+    let (n, good, replies) = std::thread::scope(|s| {
+        let handles: Vec<_> = attackers
+            .iter()
+            .map(|(who, c)| {
+                let (req, det) = (req.clone(), det.clone());
+                s.spawn(move || (*who, c.attack(&req, &det, ATTACK_WINDOW)))
+            })
+            .collect();
+        let (n, good) = collect(&gs, &truth, ATTACK_WINDOW + Duration::from_millis(500));
+        let replies: Vec<_> = handles.into_iter().map(|h| h.join().unwrap()).collect();
+        (n, good, replies)
+    });
+    for (who, (reinit, stopped)) in &replies {
+        println!(
+            "security: {who}: {reinit} reinit and {stopped} stop replies in {ATTACK_WINDOW:?}"
+        );
+        assert_eq!((*reinit, *stopped), (0, 0), "{who} was answered");
+    }
+    println!(
+        "security: during the attacks {good}/{n} detections within {TOLERANCE_PX} px of the target"
+    );
+    assert!(
+        n >= 60,
+        "only {n} detections in {ATTACK_WINDOW:?} at 20 Hz: the node stopped?"
+    );
+    assert!(good * 10 >= n * 9, "{good}/{n}: the track moved");
+
+    // 3. The ground station stops the node, then re-targets it through the init topic.
+    let commander = Commander::new(&settings(d, &ks, Some("ground_station"))).unwrap();
+    let r = commander
+        .call_stop(Duration::from_secs(15))
+        .expect("the authorised stop was answered");
+    assert!(r.success, "{}", r.message);
+    assert!(
+        wait_status(&gs, Duration::from_secs(5), |s| s.state
+            == TrackStatus::STATE_IDLE)
+        .is_some(),
+        "the node did not go idle after stop"
+    );
+    let end = Instant::now() + Duration::from_secs(15);
+    loop {
+        let (stamp, b) = newest_truth(&truth, Duration::ZERO);
+        let _ = commander.init.publish(detection(b, stamp));
+        if wait_status(&gs, Duration::from_millis(300), |s| {
+            s.state != TrackStatus::STATE_IDLE
+        })
+        .is_some()
+        {
+            break;
+        }
+        assert!(
+            Instant::now() < end,
+            "the authorised init did not restart tracking"
+        );
+    }
+    let _ = gs.take_detections();
+    let (n, good) = collect(&gs, &truth, Duration::from_secs(2));
+    println!("security: after the authorised stop + init, {good}/{n} detections within {TOLERANCE_PX} px; whole test {:.1?}", t0.elapsed());
+    assert!(n >= 10 && good * 10 >= n * 9, "{good}/{n} after init");
+
+    stop.store(true, Ordering::Relaxed);
+    let _ = camera.join();
+    node.join().unwrap().unwrap();
+    let _ = std::fs::remove_dir_all(ks.parent().unwrap());
+}
+
+/// Runs `bevt_node_under_test` with `env` and `args`; after `alive` (or as soon as it exits)
+/// calls `while_alive(still running)`, then stops it: (still running after `alive`,
+/// stderr).
+fn start_node(
+    env: &[(&str, &str)],
+    args: &[&str],
+    alive: Duration,
+    while_alive: impl FnOnce(bool),
+) -> (bool, String) {
+    let exe = env!("CARGO_BIN_EXE_bevt_node_under_test");
+    let mut cmd = Command::new(exe);
+    for k in [
+        "ROS_SECURITY_ENABLE",
+        "ROS_SECURITY_STRATEGY",
+        "ROS_SECURITY_KEYSTORE",
+        "ROS_SECURITY_ENCLAVE_OVERRIDE",
+    ] {
+        cmd.env_remove(k);
+    }
+    let mut child = cmd
+        .envs(env.iter().copied())
+        .env("ROS_DOMAIN_ID", domain(1).to_string())
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let end = Instant::now() + alive;
+    let mut running = true;
+    while Instant::now() < end {
+        if child.try_wait().unwrap().is_some() {
+            running = false;
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    while_alive(running);
+    drop(child.stdin.take()); // the node stops when its stdin closes
+    let status = child.wait().unwrap();
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    if !running {
+        assert!(!status.success(), "exited early with success: {err}");
+    }
+    (running, err)
+}
+
+#[test]
+fn start_up_follows_the_ros_security_environment() {
+    let alive = Duration::from_secs(3);
+    let none = |_| {};
+    // Off (the default): starts, says that it is unauthenticated, and obeys anyone: the
+    // unauthenticated commander of the secured test is answered here (the control).
+    let (running, err) = start_node(&[], &[], alive, |running| {
+        if !running {
+            return;
+        }
+        let s = RosSettings {
+            domain_id: domain(1),
+            ..RosSettings::default()
+        };
+        let c = Commander::new(&s).unwrap();
+        let det = detection(BBox::new(4.0, 4.0, 40.0, 32.0), 0);
+        let req = reinit_request(BBox::new(4.0, 4.0, 40.0, 32.0), Time::from_nanos(0), "");
+        let (reinit, stopped) = c.attack(&req, &det, ATTACK_WINDOW);
+        println!("security: unsecured node: the unauthenticated commander got {reinit} reinit and {stopped} stop replies");
+        assert!(
+            reinit > 0 && stopped > 0,
+            "the control attack was not answered"
+        );
+    });
+    assert!(running, "{err}");
+    assert!(err.contains("unauthenticated"), "no warning: {err}");
+    println!("security: off: {}", err.trim());
+    // Enforce without a keystore: refuses to start, with the reason.
+    let enforce = [
+        ("ROS_SECURITY_ENABLE", "true"),
+        ("ROS_SECURITY_STRATEGY", "Enforce"),
+    ];
+    let (running, err) = start_node(&enforce, &[], alive, none);
+    assert!(!running, "Enforce without a keystore started: {err}");
+    assert!(
+        err.contains("SECURITY ERROR") && err.contains("ROS_SECURITY_KEYSTORE"),
+        "{err}"
+    );
+    println!("security: Enforce, no keystore: {}", err.trim());
+    // Permissive (any other strategy) without a keystore: starts unsecured, with a warning.
+    let (running, err) = start_node(&[("ROS_SECURITY_ENABLE", "true")], &[], alive, none);
+    assert!(running, "{err}");
+    assert!(
+        err.contains("unauthenticated") && err.contains("falling back"),
+        "{err}"
+    );
+    println!("security: Permissive, no keystore: {}", err.trim());
+    let Some(ks) = keystore("sec_startup") else {
+        return;
+    };
+    let k = ks.to_str().unwrap();
+    let with_ks = [enforce[0], enforce[1], ("ROS_SECURITY_KEYSTORE", k)];
+    // Enforce, the default enclave `/`: no identity there.
+    let (running, err) = start_node(&with_ks, &[], alive, none);
+    assert!(!running && err.contains("lacks"), "{err}");
+    // Enforce with the node's enclave: starts secured, without the warning.
+    let (running, err) = start_node(
+        &with_ks,
+        &["--ros-args", "--enclave", "/bevt_node"],
+        alive,
+        none,
+    );
+    assert!(running, "{err}");
+    assert!(!err.contains("unauthenticated"), "{err}");
+    // An identity whose permissions do not cover the node's topics cannot start it, under
+    // either strategy (as in ROS 2: a present but unusable enclave is an error).
+    for strategy in ["Enforce", "Permissive"] {
+        let env = [
+            ("ROS_SECURITY_ENABLE", "true"),
+            ("ROS_SECURITY_STRATEGY", strategy),
+            ("ROS_SECURITY_KEYSTORE", k),
+        ];
+        let (running, err) = start_node(&env, &["--ros-args", "-e", "/observer"], alive, none);
+        assert!(
+            !running,
+            "{strategy}: started with the observer's permissions: {err}"
+        );
+        println!("security: {strategy}, enclave /observer: {}", err.trim());
+    }
+    let _ = std::fs::remove_dir_all(ks.parent().unwrap());
+}
