@@ -12,8 +12,8 @@
 # Enclaves (identity = the enclave path, certificate subject CN=<enclave>, as sros2 does):
 #   /bevt_node       the tracker: subscribes to its inputs, publishes its outputs, answers
 #                    its services.
-#   /ground_station  the operator: may call reinit and stop and publish on init; reads the
-#                    outputs.
+#   /ground_station  the operator: may call reinit and stop, publish on init and call the
+#                    node's parameter services; reads the outputs.
 #   /camera          the camera driver: may publish images.
 #   /observer        authenticated but unprivileged: may read the outputs, may not command.
 #
@@ -124,6 +124,10 @@ outputs="<topic>rt$ns/detections</topic><topic>rt$ns/track_status</topic><topic>
 images="<topic>rt$ns/image_raw</topic><topic>rt$ns/image_raw/compressed</topic>"
 commands_pub="<topic>rt$ns/init</topic><topic>rq$ns/reinitRequest</topic><topic>rq$ns/stopRequest</topic>"
 commands_reply="<topic>rr$ns/reinitReply</topic><topic>rr$ns/stopReply</topic>"
+# The node's ROS parameter services (get/set/list/describe_parameters...): setting a
+# parameter re-tunes the tracker, so only the ground station may call them.
+params_rq="<topic>rq$ns/bevt_node/*Request</topic>"
+params_rr="<topic>rr$ns/bevt_node/*Reply</topic>"
 
 # enclave NAME PUBLISH SUBSCRIBE: identity (key, certificate signed by the CA), permissions.
 enclave() {
@@ -170,11 +174,11 @@ EOF
 }
 
 enclave /bevt_node \
-  "$common$outputs$commands_reply" \
-  "$common$images<topic>rt$ns/init</topic><topic>rq$ns/reinitRequest</topic><topic>rq$ns/stopRequest</topic>"
+  "$common$outputs$commands_reply$params_rr" \
+  "$common$images<topic>rt$ns/init</topic><topic>rq$ns/reinitRequest</topic><topic>rq$ns/stopRequest</topic>$params_rq"
 enclave /ground_station \
-  "$common$commands_pub" \
-  "$common$outputs$images$commands_reply"
+  "$common$commands_pub$params_rq" \
+  "$common$outputs$images$commands_reply$params_rr"
 enclave /camera "$common$images" "$common"
 enclave /observer "$common" "$common$outputs"
 
