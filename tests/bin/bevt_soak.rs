@@ -2,7 +2,10 @@
 //!
 //! The node runs as its own process (`bevt_node_under_test`, the node's launch path; it
 //! stops when its standard input closes), so its memory in `/proc/<pid>/status` is its own.
-//! This process is the outside world on a private DDS domain on loopback:
+//! This process is the outside world on a private DDS domain (default `224 + pid % 7`) on
+//! loopback, in a namespace of its own (`/bevt_soak_<pid>`, printed at the start) so that
+//! only this run's node is counted (a status whose counters go backwards, or more
+//! detections than frames processed, is reported as a second node):
 //! - a synthetic camera publishing 1280×720 rgb8 frames at 30 Hz (a looping synthetic
 //!   sequence with exact truth), of which a configurable share is replaced by hostile
 //!   messages (bad encodings, step/size mismatches, truncated data, huge declared sizes,
@@ -42,8 +45,6 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-/// Frame id of the good camera frames.
-const CAMERA_FRAME: &str = "soak_camera";
 /// Prefix of the frame id of hostile messages (followed by the kind).
 const HOSTILE_PREFIX: &str = "hostile:";
 /// Frames of the looping synthetic sequence (rendered once, 2.7 MB each).
@@ -76,9 +77,15 @@ struct Args {
     /// Seconds per report row.
     #[arg(long, default_value_t = 60.0)]
     row_period: f64,
-    /// DDS domain (private to the run; the integration tests use 1..=223).
-    #[arg(long, default_value_t = 231)]
-    domain: u16,
+    /// DDS domain (default `224 + pid % 7`, in 224..=230: above the integration tests'
+    /// 1..=221, and different between two soak runs started close together).
+    #[arg(long)]
+    domain: Option<u16>,
+    /// Node namespace (default `/bevt_soak_<pid>`): the camera, `reinit`, detections and
+    /// statuses are this namespace's topics, so another node on the same domain neither
+    /// sees the soak camera nor is counted.
+    #[arg(long)]
+    namespace: Option<String>,
     /// The node executable (default: `bevt_node_under_test` beside this one).
     #[arg(long)]
     node: Option<PathBuf>,
@@ -233,6 +240,7 @@ fn spawn_camera(
     rate: f64,
     share: f64,
     shared: CameraShared,
+    camera_frame: String,
 ) -> Result<std::thread::JoinHandle<()>> {
     let CameraShared {
         stop,
@@ -283,7 +291,7 @@ fn spawn_camera(
                     peer.image(Image {
                         header: Header {
                             stamp,
-                            frame_id: CAMERA_FRAME.into(),
+                            frame_id: camera_frame.clone(),
                         },
                         height: seq.height as u32,
                         width: seq.width as u32,
@@ -309,14 +317,18 @@ fn spawn_camera(
 struct NodeProcess(Child);
 
 impl NodeProcess {
-    fn spawn(exe: &PathBuf, domain: u16) -> Result<Self> {
+    fn spawn(exe: &PathBuf, settings: &RosSettings) -> Result<Self> {
         let child = Command::new(exe)
             .args([
                 "--ros-args",
                 "-p",
-                &format!("domain_id:={domain}"),
+                &format!("domain_id:={}", settings.domain_id),
                 "-p",
                 "network_interfaces:=[127.0.0.1]",
+                "-r",
+                &format!("__ns:={}", settings.namespace),
+                "-r",
+                &format!("__node:={}", settings.node_name),
             ])
             .stdin(Stdio::piped())
             .stdout(Stdio::null())
@@ -385,6 +397,8 @@ struct Period {
     bad_reinit_refused: u64,
     load: Vec<f64>,
     cpu_ticks: u64,
+    /// Statuses whose counters went backwards (a second node publishing in the namespace).
+    foreign: u64,
 }
 
 impl Period {
@@ -398,6 +412,9 @@ impl Period {
     }
 
     fn counters(&mut self, s: &TrackStatus) {
+        if s.frames_processed < self.processed.1 || s.frames_dropped < self.dropped.1 {
+            self.foreign += 1;
+        }
         self.processed = (
             Some(
                 self.processed
@@ -450,6 +467,7 @@ impl Period {
         self.bad_reinit_refused += o.bad_reinit_refused;
         self.load.extend_from_slice(&o.load);
         self.cpu_ticks += o.cpu_ticks;
+        self.foreign += o.foreign;
     }
 }
 
@@ -512,18 +530,29 @@ fn run() -> Result<()> {
             .context("no folder of the executable")?
             .join("bevt_node_under_test"),
     };
+    let pid = std::process::id();
+    let domain = a.domain.unwrap_or(224 + (pid % 7) as u16);
+    anyhow::ensure!(domain <= 232, "--domain must be in 0..=232");
+    let namespace = a
+        .namespace
+        .clone()
+        .unwrap_or_else(|| format!("/bevt_soak_{pid}"));
     let settings = RosSettings {
-        domain_id: a.domain,
+        domain_id: domain,
+        namespace,
+        node_name: format!("bevt_soak_node_{pid}"),
         networks: vec![IpAddr::V4(Ipv4Addr::LOCALHOST)],
         ..RosSettings::default()
     };
+    // Frame id of the good camera frames (unique to this run as well).
+    let camera_frame = format!("soak_camera_{pid}");
     let mut csv = match &a.csv {
         Some(p) => Some(std::fs::File::create(p).with_context(|| format!("{}", p.display()))?),
         None => None,
     };
-    let mut node = NodeProcess::spawn(&exe, a.domain)?;
+    let mut node = NodeProcess::spawn(&exe, &settings)?;
     println!(
-        "bevt_soak: node {} (pid {}), {}x{} rgb8 at {} Hz, {:.1} % hostile, reinit every {} s, {} s, domain {}",
+        "bevt_soak: node {} (pid {}), {}x{} rgb8 at {} Hz, {:.1} % hostile, reinit every {} s, {} s, domain {}, namespace {}, node name {}",
         exe.display(),
         node.0.id(),
         a.width,
@@ -532,7 +561,9 @@ fn run() -> Result<()> {
         a.hostile_share * 100.0,
         a.reinit_period,
         a.duration,
-        a.domain
+        settings.domain_id,
+        settings.namespace,
+        settings.node_name
     );
     let seq = SynthParams {
         width: a.width,
@@ -551,7 +582,14 @@ fn run() -> Result<()> {
     );
     let peer = RawPeer::new(&settings)?;
     let gs = GroundStation::new(&settings)?;
-    let camera = spawn_camera(peer, seq, a.rate, a.hostile_share, shared)?;
+    let camera = spawn_camera(
+        peer,
+        seq,
+        a.rate,
+        a.hostile_share,
+        shared,
+        camera_frame.clone(),
+    )?;
     let newest_truth =
         || -> Option<(i64, BBox)> { truth.lock().ok()?.iter().next_back().map(|(k, v)| (*k, *v)) };
     // Start-up: the node answers a first reinit.
@@ -676,7 +714,7 @@ fn run() -> Result<()> {
         }
         let got = wall_stamp().as_nanos();
         for d in gs.take_detections() {
-            if d.header.frame_id == CAMERA_FRAME {
+            if d.header.frame_id == camera_frame {
                 cur.latencies
                     .push((got - d.header.stamp.as_nanos()) as f32 / 1e6);
                 last_seen = Some(d.header.stamp.as_nanos());
@@ -775,6 +813,21 @@ fn run() -> Result<()> {
         total.processed.1,
         total.dropped.0.unwrap_or(0),
         total.dropped.1
+    );
+    let delta_processed = total
+        .processed
+        .0
+        .map_or(0, |p| total.processed.1.saturating_sub(p));
+    println!(
+        "isolation: {} statuses with counters going backwards, {} detections for {} frames the node counted as processed{}",
+        total.foreign,
+        total.latencies.len(),
+        delta_processed,
+        if total.foreign > 0 || total.latencies.len() as u64 > u64::from(delta_processed) + 2 {
+            " -- WARNING: a second node answered in this namespace"
+        } else {
+            " (only this run's node answered)"
+        }
     );
     if died {
         bail!("the node process exited during the soak");
