@@ -198,6 +198,7 @@ fuzz_tests!(
     tracker_config,
     dataset_manifest,
     annotation,
+    bag_reader,
 );
 
 /// Every target has a test above (a new target without one fails here).
@@ -214,8 +215,36 @@ fn every_target_is_run() {
         "tracker_config",
         "dataset_manifest",
         "annotation",
+        "bag_reader",
     ];
     for t in TARGETS {
         assert!(names.contains(&t.name), "{} has no test", t.name);
+    }
+}
+
+/// The `bag_reader` seeds reach the messages: every seed (none, zstd, lz4 chunks, and no
+/// chunks) yields its two 8×8 frames, decoded as `bevt replay` does.
+#[test]
+fn bag_reader_seeds_are_read_and_decoded() {
+    use bevt_node::tool::bag::{read_mcap_bytes, BagLimits};
+    let t = TARGETS
+        .iter()
+        .find(|t| t.name == "bag_reader")
+        .expect("the bag_reader target");
+    let seeds = (t.seeds)();
+    assert_eq!(seeds.len(), 4);
+    for (i, s) in seeds.iter().enumerate() {
+        let mut buf = bevt_node::convert::PixelBuffer::default();
+        let limits = bevt_node::convert::ImageLimits::default();
+        let mut frames = Vec::new();
+        let n = read_mcap_bytes(s, "/camera/image_raw", BagLimits::default(), |m| {
+            frames.push(bevt_node::tool::replay::decode_message(
+                &m, &mut buf, &limits,
+            ));
+            std::ops::ControlFlow::Continue(())
+        })
+        .unwrap_or_else(|e| panic!("seed {i}: {e}"));
+        assert_eq!(n, 2, "seed {i}");
+        assert_eq!(frames, vec![Ok((8, 8)), Ok((8, 8))], "seed {i}");
     }
 }

@@ -84,6 +84,11 @@ pub const TARGETS: &[Target] = &[
         run: annotation,
         seeds: seeds_annotation,
     },
+    Target {
+        name: "bag_reader",
+        run: bag_reader,
+        seeds: seeds_bag_reader,
+    },
 ];
 
 /// Small limits for the fuzz bodies: inputs stay fast to convert (the default limits are
@@ -679,5 +684,103 @@ fn seeds_annotation() -> Vec<Vec<u8>> {
     vec![
         b"1,2,3,4\n5,6,7,8\nNaN,NaN,NaN,NaN\n".to_vec(),
         b"1\t2\t3\t4\r\n0 0 0 0\n".to_vec(),
+    ]
+}
+
+/// The topic the `bag_reader` seeds record and the body reads.
+const BAG_TOPIC: &str = "/camera/image_raw";
+
+/// The `bevt replay` reading path on an MCAP stream: records, chunks (uncompressed, zstd,
+/// lz4; their declared sizes are untrusted), messages of the topic decoded into frames as
+/// replay does. The reader runs with its real limit (1 GiB records): an allocation from a
+/// declared length would show as memory (`scripts/fuzz.sh` gives this target a 512 MB RSS
+/// limit). Errors are fine; a panic, a hang or memory is the finding.
+pub fn bag_reader(data: &[u8]) {
+    use bevt_node::tool::bag::{read_mcap_bytes, BagLimits};
+    let limits = small_limits();
+    let mut buf = PixelBuffer::default();
+    let mut handed = 0u64;
+    let r = read_mcap_bytes(data, BAG_TOPIC, BagLimits::default(), |m| {
+        handed += 1;
+        assert!(
+            m.data.len() <= data.len() * 64 + (1 << 20),
+            "a message larger than its input could make"
+        );
+        if let Ok((w, h)) = bevt_node::tool::replay::decode_message(&m, &mut buf, &limits) {
+            assert!(
+                w >= 1
+                    && h >= 1
+                    && w <= limits.max_width as usize
+                    && h <= limits.max_height as usize
+            );
+        }
+        std::ops::ControlFlow::Continue(())
+    });
+    match r {
+        Ok(n) => assert_eq!(n, handed, "count of messages handed out"),
+        Err(e) => assert!(!e.to_string().is_empty()),
+    }
+}
+
+/// A small MCAP recording of `BAG_TOPIC` (two 8×8 rgb8 frames and a PNG one on another
+/// topic) with `compression`, chunked or not.
+fn mcap_seed(compression: Option<mcap::Compression>, chunked: bool) -> Vec<u8> {
+    let mut out = std::io::Cursor::new(Vec::new());
+    let write = |out: &mut std::io::Cursor<Vec<u8>>| -> mcap::McapResult<()> {
+        let mut w = mcap::WriteOptions::new()
+            .compression(compression)
+            .use_chunks(chunked)
+            .chunk_size(Some(512))
+            .create(out)?;
+        let meta = std::collections::BTreeMap::new();
+        let s = w.add_schema("sensor_msgs/msg/Image", "ros2msg", b"")?;
+        let c = w.add_channel(s, BAG_TOPIC, "cdr", &meta)?;
+        let s2 = w.add_schema("sensor_msgs/msg/CompressedImage", "ros2msg", b"")?;
+        let c2 = w.add_channel(s2, "/camera/image_raw/compressed", "cdr", &meta)?;
+        for i in 0..2u8 {
+            let img = Image {
+                header: header(),
+                height: 8,
+                width: 8,
+                encoding: "rgb8".into(),
+                is_bigendian: 0,
+                step: 24,
+                data: vec![40 * i; 192],
+            };
+            let h = mcap::records::MessageHeader {
+                channel_id: c,
+                sequence: u32::from(i),
+                log_time: 1_000 + u64::from(i),
+                publish_time: 1_000 + u64::from(i),
+            };
+            w.write_to_known_channel(&h, &cdr(&img))?;
+        }
+        let png = CompressedImage {
+            header: header(),
+            format: "png".into(),
+            data: encoded(image::ImageFormat::Png),
+        };
+        let h = mcap::records::MessageHeader {
+            channel_id: c2,
+            sequence: 0,
+            log_time: 2_000,
+            publish_time: 2_000,
+        };
+        w.write_to_known_channel(&h, &cdr(&png))?;
+        w.finish()?;
+        Ok(())
+    };
+    match write(&mut out) {
+        Ok(()) => out.into_inner(),
+        Err(_) => Vec::new(),
+    }
+}
+
+fn seeds_bag_reader() -> Vec<Vec<u8>> {
+    vec![
+        mcap_seed(None, false),
+        mcap_seed(None, true),
+        mcap_seed(Some(mcap::Compression::Zstd), true),
+        mcap_seed(Some(mcap::Compression::Lz4), true),
     ]
 }

@@ -305,6 +305,11 @@ fn corrupt(path: &Path, reason: impl std::fmt::Display) -> BagError {
     }
 }
 
+/// Most bytes asked of the source at once: the reader's buffer grows with the bytes that
+/// arrive, not with a length the file declares (a record declaring 1 GiB in a 100-byte file
+/// costs 1 MiB, then an error).
+const READ_PIECE: usize = 1 << 20;
+
 fn read_mcap(
     path: &Path,
     topic: &str,
@@ -312,25 +317,228 @@ fn read_mcap(
     seen: &mut BTreeMap<String, TopicInfo>,
     f: &mut impl FnMut(BagMessage<'_>) -> ControlFlow<()>,
 ) -> Result<FileRead, BagError> {
-    let mut file = std::fs::File::open(path).map_err(|e| open_err(path, e.to_string()))?;
+    let file = std::fs::File::open(path).map_err(|e| open_err(path, e.to_string()))?;
+    read_mcap_from(file, path, topic, limits, seen, f)
+}
+
+/// Hands every message of `topic` in the MCAP stream `data` to `f` (as
+/// [`Bag::read_topic`] does for a file; the fuzz target `bag_reader` reads through here).
+/// Returns the number of messages handed out.
+///
+/// # Errors
+/// As [`Bag::read_topic`], the path being `<memory>`.
+pub fn read_mcap_bytes(
+    data: &[u8],
+    topic: &str,
+    limits: BagLimits,
+    mut f: impl FnMut(BagMessage<'_>) -> ControlFlow<()>,
+) -> Result<u64, BagError> {
+    let mut seen = BTreeMap::new();
+    let r = read_mcap_from(
+        data,
+        Path::new("<memory>"),
+        topic,
+        limits,
+        &mut seen,
+        &mut f,
+    )?;
+    if !r.found {
+        return Err(BagError::NoSuchTopic {
+            topic: topic.to_string(),
+            available: list_topics(&seen.into_values().collect::<Vec<_>>()),
+        });
+    }
+    Ok(r.count)
+}
+
+/// The records of a file being read: schemas and channels seen, the wanted channel.
+struct McapState<'t> {
+    topic: &'t str,
+    schemas: HashMap<u16, String>,
+    wanted: Option<(u16, String)>,
+    out: FileRead,
+}
+
+impl McapState<'_> {
+    /// Handles one record (of the file or of a chunk); `Break` when `f` stopped or the data
+    /// section ended.
+    fn record(
+        &mut self,
+        path: &Path,
+        opcode: u8,
+        data: &[u8],
+        limits: BagLimits,
+        seen: &mut BTreeMap<String, TopicInfo>,
+        f: &mut impl FnMut(BagMessage<'_>) -> ControlFlow<()>,
+    ) -> Result<ControlFlow<()>, BagError> {
+        match mcap::parse_record(opcode, data).map_err(|e| corrupt(path, e))? {
+            Record::Schema { header, .. } => {
+                self.schemas.insert(header.id, header.name);
+            }
+            Record::Channel(c) => {
+                let ty = self.schemas.get(&c.schema_id).cloned().unwrap_or_default();
+                seen.entry(c.topic.clone()).or_insert_with(|| TopicInfo {
+                    name: c.topic.clone(),
+                    msg_type: ty.clone(),
+                    count: None,
+                });
+                if c.topic == self.topic && c.message_encoding == "cdr" {
+                    self.out.found = true;
+                    self.wanted = Some((c.id, ty));
+                }
+            }
+            Record::Message { header, data } => {
+                let Some((id, ty)) = &self.wanted else {
+                    return Ok(ControlFlow::Continue(()));
+                };
+                if header.channel_id != *id {
+                    return Ok(ControlFlow::Continue(()));
+                }
+                self.out.count += 1;
+                let msg = BagMessage {
+                    log_time: header.log_time,
+                    msg_type: ty,
+                    data: &data,
+                };
+                if f(msg).is_break() {
+                    self.out.stopped = true;
+                    return Ok(ControlFlow::Break(()));
+                }
+            }
+            Record::Chunk { header, data } => {
+                let records =
+                    decompress_chunk(&header, &data, limits).map_err(|e| corrupt(path, e))?;
+                let mut rest: &[u8] = &records;
+                // Records inside a chunk: opcode (1 byte), length (u64 LE), body.
+                while !rest.is_empty() {
+                    let (&op, after) = rest
+                        .split_first()
+                        .ok_or_else(|| corrupt(path, "chunk record cut short"))?;
+                    let (len, body) = after
+                        .split_first_chunk::<8>()
+                        .ok_or_else(|| corrupt(path, "chunk record length cut short"))?;
+                    let len = usize::try_from(u64::from_le_bytes(*len))
+                        .ok()
+                        .filter(|&n| n <= body.len())
+                        .ok_or_else(|| {
+                            corrupt(path, "a record in a chunk is longer than the chunk")
+                        })?;
+                    let (data, next) = body.split_at(len);
+                    if op == mcap::records::op::CHUNK {
+                        return Err(corrupt(path, "a chunk inside a chunk"));
+                    }
+                    if self.record(path, op, data, limits, seen, f)?.is_break() {
+                        return Ok(ControlFlow::Break(()));
+                    }
+                    rest = next;
+                }
+            }
+            // The summary repeats schemas and channels; nothing else matters here.
+            Record::DataEnd(_) => return Ok(ControlFlow::Break(())),
+            _ => {}
+        }
+        Ok(ControlFlow::Continue(()))
+    }
+}
+
+/// The records of a chunk, decompressed. The declared uncompressed size is checked against
+/// the limit and against what the compressed data really yields; the output buffer grows
+/// with the bytes decompressed, never to the declared size up front.
+fn decompress_chunk<'a>(
+    header: &mcap::records::ChunkHeader,
+    data: &'a [u8],
+    limits: BagLimits,
+) -> Result<std::borrow::Cow<'a, [u8]>, String> {
+    let declared = header.uncompressed_size;
+    let want = usize::try_from(declared)
+        .ok()
+        .filter(|&n| n <= limits.max_record_bytes)
+        .ok_or_else(|| {
+            format!(
+                "a chunk declares {declared} bytes uncompressed, over the limit of {}",
+                limits.max_record_bytes
+            )
+        })?;
+    let bounded = |mut r: Box<dyn Read + 'a>| -> Result<Vec<u8>, String> {
+        let mut out = Vec::new();
+        let mut piece = vec![0u8; 64 * 1024];
+        loop {
+            let n = match r.read(&mut piece) {
+                Ok(0) => break,
+                Ok(n) => n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => return Err(format!("{} chunk: {e}", header.compression)),
+            };
+            if out.len() + n > want {
+                return Err(format!(
+                    "a {} chunk decompresses to more than the {want} bytes it declares",
+                    header.compression
+                ));
+            }
+            out.extend_from_slice(&piece[..n]);
+        }
+        if out.len() != want {
+            return Err(format!(
+                "a {} chunk decompresses to {} bytes, it declares {want}",
+                header.compression,
+                out.len()
+            ));
+        }
+        Ok(out)
+    };
+    match header.compression.as_str() {
+        "" if data.len() == want => Ok(std::borrow::Cow::Borrowed(data)),
+        "" => Err(format!(
+            "an uncompressed chunk holds {} bytes, it declares {want}",
+            data.len()
+        )),
+        "zstd" => {
+            let d = zstd::stream::read::Decoder::with_buffer(data)
+                .map_err(|e| format!("zstd chunk: {e}"))?;
+            bounded(Box::new(d)).map(std::borrow::Cow::Owned)
+        }
+        "lz4" => {
+            let d = lz4::Decoder::new(data).map_err(|e| format!("lz4 chunk: {e}"))?;
+            bounded(Box::new(d)).map(std::borrow::Cow::Owned)
+        }
+        other => Err(format!(
+            "chunk compression {other:?}: only zstd and lz4 are read"
+        )),
+    }
+}
+
+fn read_mcap_from(
+    mut src: impl Read,
+    path: &Path,
+    topic: &str,
+    limits: BagLimits,
+    seen: &mut BTreeMap<String, TopicInfo>,
+    f: &mut impl FnMut(BagMessage<'_>) -> ControlFlow<()>,
+) -> Result<FileRead, BagError> {
+    // Chunks come whole (their compressed bytes are read as they arrive) and are
+    // decompressed here, bounded: mcap's own chunk reader sizes its output buffer from the
+    // record length a chunk declares.
     let mut reader = LinearReader::new_with_options(
-        LinearReaderOptions::default().with_record_length_limit(limits.max_record_bytes),
+        LinearReaderOptions::default()
+            .with_record_length_limit(limits.max_record_bytes)
+            .with_emit_chunks(true),
     );
-    let mut schemas: HashMap<u16, String> = HashMap::new();
-    // Channel id -> (topic, type) of the channels seen so far.
-    let mut channels: HashMap<u16, (String, String)> = HashMap::new();
-    let mut wanted: Option<(u16, String)> = None;
-    let mut out = FileRead {
-        found: false,
-        stopped: false,
-        count: 0,
+    let mut st = McapState {
+        topic,
+        schemas: HashMap::new(),
+        wanted: None,
+        out: FileRead {
+            found: false,
+            stopped: false,
+            count: 0,
+        },
     };
     while let Some(event) = reader.next_event() {
         match event.map_err(|e| corrupt(path, e))? {
             LinearReadEvent::ReadRequest(n) => {
-                let buf = reader.insert(n);
+                let buf = reader.insert(n.min(READ_PIECE));
                 let got = loop {
-                    match file.read(buf) {
+                    match src.read(buf) {
                         Ok(k) => break k,
                         Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
                         Err(e) => return Err(corrupt(path, e)),
@@ -339,47 +547,13 @@ fn read_mcap(
                 reader.notify_read(got);
             }
             LinearReadEvent::Record { opcode, data } => {
-                match mcap::parse_record(opcode, data).map_err(|e| corrupt(path, e))? {
-                    Record::Schema { header, .. } => {
-                        schemas.insert(header.id, header.name);
-                    }
-                    Record::Channel(c) => {
-                        let ty = schemas.get(&c.schema_id).cloned().unwrap_or_default();
-                        seen.entry(c.topic.clone()).or_insert_with(|| TopicInfo {
-                            name: c.topic.clone(),
-                            msg_type: ty.clone(),
-                            count: None,
-                        });
-                        if c.topic == topic && c.message_encoding == "cdr" {
-                            out.found = true;
-                            wanted = Some((c.id, ty.clone()));
-                        }
-                        channels.insert(c.id, (c.topic, ty));
-                    }
-                    Record::Message { header, data } => {
-                        let Some((id, ty)) = &wanted else { continue };
-                        if header.channel_id != *id {
-                            continue;
-                        }
-                        out.count += 1;
-                        let msg = BagMessage {
-                            log_time: header.log_time,
-                            msg_type: ty,
-                            data: &data,
-                        };
-                        if f(msg).is_break() {
-                            out.stopped = true;
-                            return Ok(out);
-                        }
-                    }
-                    // The summary repeats schemas and channels; nothing else matters here.
-                    Record::DataEnd(_) => break,
-                    _ => {}
+                if st.record(path, opcode, data, limits, seen, f)?.is_break() {
+                    break;
                 }
             }
         }
     }
-    Ok(out)
+    Ok(st.out)
 }
 
 fn read_sqlite(
@@ -450,4 +624,130 @@ fn read_sqlite(
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TOPIC: &str = "/cam";
+
+    /// An MCAP stream of `n` messages of 100 bytes each on `TOPIC`.
+    fn mcap(compression: Option<mcap::Compression>, n: u32) -> Vec<u8> {
+        let mut out = std::io::Cursor::new(Vec::new());
+        let mut w = mcap::WriteOptions::new()
+            .compression(compression)
+            .create(&mut out)
+            .unwrap();
+        let s = w
+            .add_schema("sensor_msgs/msg/Image", "ros2msg", b"")
+            .unwrap();
+        let c = w.add_channel(s, TOPIC, "cdr", &BTreeMap::new()).unwrap();
+        for i in 0..n {
+            let h = mcap::records::MessageHeader {
+                channel_id: c,
+                sequence: i,
+                log_time: u64::from(i),
+                publish_time: u64::from(i),
+            };
+            w.write_to_known_channel(&h, &[i as u8; 100]).unwrap();
+        }
+        w.finish().unwrap();
+        drop(w);
+        out.into_inner()
+    }
+
+    /// Offset of the body of the first record with `opcode` (records walked from the magic).
+    fn record_body(file: &[u8], opcode: u8) -> usize {
+        let mut at = 8;
+        loop {
+            let len = u64::from_le_bytes(file[at + 1..at + 9].try_into().unwrap()) as usize;
+            if file[at] == opcode {
+                return at + 9;
+            }
+            at += 9 + len;
+        }
+    }
+
+    fn read(file: &[u8]) -> Result<u64, BagError> {
+        read_mcap_bytes(file, TOPIC, BagLimits::default(), |m| {
+            assert_eq!(m.data.len(), 100);
+            ControlFlow::Continue(())
+        })
+    }
+
+    #[test]
+    fn every_compression_reads_all_messages() {
+        for c in [
+            None,
+            Some(mcap::Compression::Zstd),
+            Some(mcap::Compression::Lz4),
+        ] {
+            assert_eq!(read(&mcap(c, 5)).unwrap(), 5, "{c:?}");
+        }
+    }
+
+    #[test]
+    fn a_record_declaring_a_huge_length_is_an_error_without_reading_it() {
+        // A chunk declaring 1 GiB - 1 in a tiny stream: the reader may only buffer what
+        // arrives (this test allocated ~1 GiB before the bounded reads).
+        let mut f = mcap(None, 1);
+        let at = record_body(&f, mcap::records::op::CHUNK) - 8;
+        f[at..at + 8].copy_from_slice(&((1u64 << 30) - 1).to_le_bytes());
+        let hwm = || -> Option<u64> {
+            let s = std::fs::read_to_string("/proc/self/status").ok()?;
+            s.lines()
+                .find_map(|l| l.strip_prefix("VmHWM:"))?
+                .trim()
+                .trim_end_matches("kB")
+                .trim()
+                .parse()
+                .ok()
+        };
+        let before = hwm();
+        let e = read(&f).unwrap_err().to_string();
+        assert!(e.contains("<memory>"), "{e}");
+        // Peak RSS (Linux): the declared gigabyte was not allocated (other tests of this
+        // process allocate far less than 512 MiB).
+        if let (Some(a), Some(b)) = (before, hwm()) {
+            assert!(b - a < 512 * 1024, "peak RSS rose {} KiB", b - a);
+        }
+    }
+
+    #[test]
+    fn a_chunk_lying_about_its_uncompressed_size_is_refused() {
+        for (c, bigger) in [
+            (Some(mcap::Compression::Zstd), true),
+            (Some(mcap::Compression::Zstd), false),
+            (Some(mcap::Compression::Lz4), true),
+            (None, true),
+        ] {
+            let mut f = mcap(c, 3);
+            let body = record_body(&f, mcap::records::op::CHUNK);
+            let at = body + 16;
+            let real = u64::from_le_bytes(f[at..at + 8].try_into().unwrap());
+            let lie = if bigger { real + 1000 } else { real - 1 };
+            f[at..at + 8].copy_from_slice(&lie.to_le_bytes());
+            let e = read(&f).unwrap_err().to_string();
+            assert!(e.contains("declares"), "{c:?} {bigger}: {e}");
+        }
+        // Over the limit: refused before decompressing.
+        let mut f = mcap(Some(mcap::Compression::Zstd), 1);
+        let at = record_body(&f, mcap::records::op::CHUNK) + 16;
+        f[at..at + 8].copy_from_slice(&(1u64 << 40).to_le_bytes());
+        let e = read(&f).unwrap_err().to_string();
+        assert!(e.contains("over the limit"), "{e}");
+    }
+
+    #[test]
+    fn a_record_longer_than_its_chunk_is_refused() {
+        // Uncompressed chunk: the first record inside it declares 2^40 bytes.
+        let mut f = mcap(None, 2);
+        let body = record_body(&f, mcap::records::op::CHUNK);
+        let clen = u32::from_le_bytes(f[body + 28..body + 32].try_into().unwrap()) as usize;
+        let records = body + 32 + clen + 8;
+        f[records + 1..records + 9].copy_from_slice(&(1u64 << 40).to_le_bytes());
+        let e = read(&f).unwrap_err().to_string();
+        assert!(e.contains("longer than the chunk"), "{e}");
+    }
 }

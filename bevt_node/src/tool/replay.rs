@@ -741,6 +741,26 @@ pub fn replay(opts: &ReplayOptions, show_progress: bool) -> Result<ReplaySummary
     }
 }
 
+/// Decodes one bag message (an `Image` or `CompressedImage`) into a frame in `buf`, as
+/// `bevt replay` does before tracking; returns its width and height.
+///
+/// # Errors
+/// Why the message is not a usable frame (its CDR, its type, its pixels).
+pub fn decode_message(
+    m: &BagMessage<'_>,
+    buf: &mut crate::convert::PixelBuffer,
+    limits: &crate::convert::ImageLimits,
+) -> Result<(usize, usize), String> {
+    decode_view(m.msg_type, m.data).and_then(|v| match &v {
+        View::Raw(v) => crate::convert::frame_from_image_view(v, buf, limits)
+            .map(|f| (f.width(), f.height()))
+            .map_err(|e| e.to_string()),
+        View::Compressed(v) => crate::convert::frame_from_compressed_view(v, buf, limits)
+            .map(|f| (f.width(), f.height()))
+            .map_err(|e| e.to_string()),
+    })
+}
+
 /// Throughput of reading and decoding alone (no tracking, no output): frames decoded and
 /// the wall time, s. Frames that fail to decode are counted in `skipped`.
 ///
@@ -763,15 +783,7 @@ pub fn decode_only(
     let limits = node.image_limits;
     bag.read_topic(topic, |m| {
         summary.messages += 1;
-        let r = decode_view(m.msg_type, m.data).and_then(|v| match &v {
-            View::Raw(v) => crate::convert::frame_from_image_view(v, &mut buf, &limits)
-                .map(|f| f.width())
-                .map_err(|e| e.to_string()),
-            View::Compressed(v) => crate::convert::frame_from_compressed_view(v, &mut buf, &limits)
-                .map(|f| f.width())
-                .map_err(|e| e.to_string()),
-        });
-        match r {
+        match decode_message(&m, &mut buf, &limits) {
             Ok(_) => decoded += 1,
             Err(e) => *summary.skipped.entry(e).or_insert(0) += 1,
         }
