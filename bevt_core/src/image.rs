@@ -220,7 +220,11 @@ pub struct Sampler {
     /// Frame coordinate (pixel edge) of `inter`'s top-left corner.
     ox: f32,
     oy: f32,
-    rowsum: Vec<f32>,
+    /// Integer row sums of one output row, interleaved as the frame's bytes.
+    acc16: Vec<u16>,
+    acc32: Vec<u32>,
+    /// Per region column, the byte offset of its pixel in the row sums.
+    col_src: Vec<usize>,
 }
 
 impl Sampler {
@@ -255,7 +259,6 @@ impl Sampler {
         self.inter_h = h;
         self.planes = planes;
         self.inter.resize(w * h * planes, 0.0);
-        self.rowsum.resize(w * factor * planes, 0.0);
 
         let bpp = frame.format().bytes_per_pixel();
         let offs = frame.format().rgb_offsets();
@@ -268,53 +271,55 @@ impl Sampler {
         let inv = 1.0 / (f * f);
         // Region columns `0..wide`: those left of the frame replicate column 0, those right
         // of it column `fw − 1`, the span `left..right` is read in place, sequentially.
+        // When the span is empty, `first_x` is the replicated column itself.
         let wide = w * factor;
         let left = (-sx0).clamp(0, wide as isize) as usize;
         let right = (fw - sx0).clamp(left as isize, wide as isize) as usize;
         let first_x = (sx0 + left as isize).clamp(0, fw - 1) as usize;
+        let nspan = (right - left).max(1);
+        let bytes = nspan * bpp;
+        // Byte offset in the span of each region column's pixel.
+        self.col_src.clear();
+        self.col_src.extend((0..wide).map(|x| {
+            let i = if x < left {
+                0
+            } else if x >= right {
+                nspan - 1
+            } else {
+                x - left
+            };
+            i * bpp
+        }));
+        // The `factor` rows of one output row are summed as exact integers, interleaved as
+        // in the frame (one widening add per byte), in u16 batches of at most
+        // `U16_ROWS` rows; integer sums below 2^24 are what the f32 sums were.
+        const U16_ROWS: usize = 256;
+        let batched = factor > U16_ROWS;
+        self.acc16.resize(bytes, 0);
+        self.acc32.resize(if batched { bytes } else { 0 }, 0);
         for r in 0..h {
-            self.rowsum.iter_mut().for_each(|v| *v = 0.0);
+            self.acc16.iter_mut().for_each(|v| *v = 0);
+            self.acc32.iter_mut().for_each(|v| *v = 0);
             for k in 0..factor {
-                let sy = (sy0 + (r * factor + k) as isize).clamp(0, fh - 1) as usize;
-                let row = &data[sy * stride..sy * stride + fw as usize * bpp];
-                let (first, last) = (&row[..bpp], &row[row.len() - bpp..]);
-                let span = &row[first_x * bpp..first_x * bpp + (right - left) * bpp];
-                if planes == 3 {
-                    let (a0, rest) = self.rowsum.split_at_mut(wide);
-                    let (a1, a2) = rest.split_at_mut(wide);
-                    let [o0, o1, o2] = offs;
-                    for (((x, y), z), px) in a0[left..right]
-                        .iter_mut()
-                        .zip(&mut a1[left..right])
-                        .zip(&mut a2[left..right])
-                        .zip(span.chunks_exact(bpp))
-                    {
-                        *x += px[o0] as f32;
-                        *y += px[o1] as f32;
-                        *z += px[o2] as f32;
-                    }
-                } else {
-                    let a0 = &mut self.rowsum[..wide];
-                    for (a, px) in a0[left..right].iter_mut().zip(span.chunks_exact(bpp)) {
-                        *a += px[offs[0]] as f32;
-                    }
+                if batched && k > 0 && k % U16_ROWS == 0 {
+                    flush(&mut self.acc16, &mut self.acc32);
                 }
-                for p in 0..planes {
-                    let acc = &mut self.rowsum[p * wide..(p + 1) * wide];
-                    let (vl, vr) = (first[offs[p]] as f32, last[offs[p]] as f32);
-                    acc[..left].iter_mut().for_each(|a| *a += vl);
-                    acc[right..].iter_mut().for_each(|a| *a += vr);
+                let sy = (sy0 + (r * factor + k) as isize).clamp(0, fh - 1) as usize;
+                let start = sy * stride + first_x * bpp;
+                let src = &data[start..start + bytes];
+                for (a, &b) in self.acc16.iter_mut().zip(src) {
+                    *a += u16::from(b);
                 }
             }
+            if batched {
+                flush(&mut self.acc16, &mut self.acc32);
+            }
             for p in 0..planes {
-                let acc = &self.rowsum[p * wide..(p + 1) * wide];
                 let out = &mut self.inter[(p * h + r) * w..(p * h + r + 1) * w];
-                if factor == 1 {
-                    out.copy_from_slice(acc);
+                if batched {
+                    columns(&self.acc32, &self.col_src, offs[p], factor, inv, out);
                 } else {
-                    for (o, chunk) in out.iter_mut().zip(acc.chunks_exact(factor)) {
-                        *o = chunk.iter().sum::<f32>() * inv;
-                    }
+                    columns(&self.acc16, &self.col_src, offs[p], factor, inv, out);
                 }
             }
         }
@@ -383,6 +388,36 @@ impl Sampler {
                     *o = src.iter().zip(&ct.w).map(|(a, b)| a * b).sum();
                 }
             }
+        }
+    }
+}
+
+/// Adds a u16 row-sum batch into the u32 sums and clears it.
+fn flush(acc16: &mut [u16], acc32: &mut [u32]) {
+    for (a, b) in acc32.iter_mut().zip(acc16.iter_mut()) {
+        *a += u32::from(*b);
+        *b = 0;
+    }
+}
+
+/// One plane of one box-averaged row: output column `j` sums the row sums of region
+/// columns `j·factor..(j+1)·factor` (byte offsets `col_src`, plus the plane's offset `off`).
+fn columns<T: Copy + Into<u32>>(
+    acc: &[T],
+    col_src: &[usize],
+    off: usize,
+    factor: usize,
+    inv: f32,
+    out: &mut [f32],
+) {
+    if factor == 1 {
+        for (o, &c) in out.iter_mut().zip(col_src) {
+            *o = acc[c + off].into() as f32;
+        }
+    } else {
+        for (o, cols) in out.iter_mut().zip(col_src.chunks_exact(factor)) {
+            let sum: u32 = cols.iter().map(|&c| acc[c + off].into()).sum();
+            *o = sum as f32 * inv;
         }
     }
 }
