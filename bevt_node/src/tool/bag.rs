@@ -371,6 +371,21 @@ impl McapState<'_> {
         seen: &mut BTreeMap<String, TopicInfo>,
         f: &mut impl FnMut(BagMessage<'_>) -> ControlFlow<()>,
     ) -> Result<ControlFlow<()>, BagError> {
+        use mcap::records::op;
+        // Only the records read here are parsed: mcap 0.26's parser of the others can panic
+        // on a malformed record (an attachment cut before its CRC slices out of bounds;
+        // found by the bag_reader fuzz target).
+        if ![
+            op::SCHEMA,
+            op::CHANNEL,
+            op::MESSAGE,
+            op::CHUNK,
+            op::DATA_END,
+        ]
+        .contains(&opcode)
+        {
+            return Ok(ControlFlow::Continue(()));
+        }
         match mcap::parse_record(opcode, data).map_err(|e| corrupt(path, e))? {
             Record::Schema { header, .. } => {
                 self.schemas.insert(header.id, header.name);
@@ -737,6 +752,25 @@ mod tests {
         f[at..at + 8].copy_from_slice(&(1u64 << 40).to_le_bytes());
         let e = read(&f).unwrap_err().to_string();
         assert!(e.contains("over the limit"), "{e}");
+    }
+
+    #[test]
+    fn records_not_read_are_not_parsed() {
+        // An attachment record cut before its CRC (mcap's parser panics on it) between the
+        // header and the data: skipped, the messages are read.
+        let f = mcap(None, 2);
+        let at = record_body(&f, mcap::records::op::CHUNK) - 9;
+        let mut body = Vec::new();
+        body.extend_from_slice(&[0u8; 16]); // log and create time
+        body.extend_from_slice(&[1, 0, 0, 0, b'a']); // name
+        body.extend_from_slice(&[0, 0, 0, 0]); // media type
+        body.extend_from_slice(&0u64.to_le_bytes()); // data length, then no CRC
+        let mut g = f[..at].to_vec();
+        g.push(mcap::records::op::ATTACHMENT);
+        g.extend_from_slice(&(body.len() as u64).to_le_bytes());
+        g.extend_from_slice(&body);
+        g.extend_from_slice(&f[at..]);
+        assert_eq!(read(&g).unwrap(), 2);
     }
 
     #[test]
