@@ -48,14 +48,34 @@ pub fn table() -> &'static [[f32; CN_CHANNELS]] {
 /// floored into their bin; out-of-range values are clamped).
 #[inline]
 pub fn bin_index(r: f32, g: f32, b: f32) -> usize {
-    let q = |v: f32| (v / BIN_WIDTH).clamp(0.0, MAX_LEVEL) as usize;
-    q(r) + 32 * q(g) + 1024 * q(b)
+    bin_code(r, g, b) as usize
+}
+
+/// [`bin_index`] as `u32`, through `i32` conversions (which vectorise; the clamped values
+/// convert alike).
+#[inline(always)]
+fn bin_code(r: f32, g: f32, b: f32) -> u32 {
+    let q = |v: f32| (v / BIN_WIDTH).clamp(0.0, MAX_LEVEL) as i32;
+    (q(r) + 32 * q(g) + 1024 * q(b)) as u32
 }
 
 /// Writes the cell-mean colour names of a three-plane `patch` into `out`
 /// (`CN_CHANNELS` channel-major maps of `rows × cols` cells, each `cell × cell` pixels).
 /// Does nothing for a one-plane patch (the caller does not allocate the group then).
 pub fn cell_colornames(patch: &Patch, cell: usize, rows: usize, cols: usize, out: &mut [f32]) {
+    cell_colornames_with(patch, cell, rows, cols, out, &mut Vec::new());
+}
+
+/// [`cell_colornames`] with a caller-owned scratch buffer (no allocation once it has grown
+/// to a patch row).
+pub fn cell_colornames_with(
+    patch: &Patch,
+    cell: usize,
+    rows: usize,
+    cols: usize,
+    out: &mut [f32],
+    codes: &mut Vec<u32>,
+) {
     let nb = rows * cols;
     if patch.planes < 3 || out.len() < CN_CHANNELS * nb || cell == 0 {
         return;
@@ -75,15 +95,19 @@ pub fn cell_colornames(patch: &Patch, cell: usize, rows: usize, cols: usize, out
                 &patch.data[n + i..n + i + width],
                 &patch.data[2 * n + i..2 * n + i + width],
             );
+            // The row's table indices first, in one vectorisable pass.
+            codes.clear();
+            codes.extend(
+                pr.iter()
+                    .zip(pg)
+                    .zip(pb)
+                    .map(|((&vr, &vg), &vb)| bin_code(vr, vg, vb)),
+            );
             for cx in 0..cols {
                 let span = cx * cell..((cx + 1) * cell).min(width);
                 let mut sum = [0.0f32; CN_CHANNELS];
-                for ((&vr, &vg), &vb) in pr[span.clone()]
-                    .iter()
-                    .zip(&pg[span.clone()])
-                    .zip(&pb[span])
-                {
-                    let row = &t[bin_index(vr, vg, vb)];
+                for &code in &codes[span] {
+                    let row = &t[code as usize];
                     for (s, v) in sum.iter_mut().zip(row) {
                         *s += v;
                     }

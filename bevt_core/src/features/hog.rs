@@ -45,6 +45,8 @@ pub struct Hog {
     row_gx: Vec<f32>,
     row_gy: Vec<f32>,
     row_m2: Vec<f32>,
+    /// Colour-name table indices of one patch row.
+    cn_codes: Vec<u32>,
 }
 
 /// `atan2(y, x)` in (−π, π] to within 1e-5 rad (a minimax polynomial on [0, 1]), far below
@@ -78,7 +80,8 @@ fn orientation_bin(gx: f32, gy: f32) -> u8 {
     let nbins = (2 * ORIENTATIONS) as u32;
     let t = fast_atan2(gy, gx) * (ORIENTATIONS as f32 / std::f32::consts::PI);
     let t = if t < 0.0 { t + nbins as f32 } else { t };
-    let b = (t + 0.5) as u32;
+    // t + 0.5 lies in [0.5, 18.5): the i32 conversion (which vectorises) truncates alike.
+    let b = (t + 0.5) as i32 as u32;
     (if b >= nbins { b - nbins } else { b }) as u8
 }
 
@@ -108,6 +111,7 @@ impl Hog {
             row_gx: Vec::new(),
             row_gy: Vec::new(),
             row_m2: Vec::new(),
+            cn_codes: Vec::new(),
         }
     }
 
@@ -453,12 +457,13 @@ impl FeatureExtractor for Hog {
                     patch.planes
                 )));
             }
-            colornames::cell_colornames(
+            colornames::cell_colornames_with(
                 patch,
                 cell,
                 hb,
                 wb,
                 &mut out.data[next * nb..(next + colornames::CN_CHANNELS) * nb],
+                &mut self.cn_codes,
             );
         }
         Ok(())
