@@ -277,8 +277,6 @@ fn collect(gs: &GroundStation, truth: &TruthLog, dur: Duration) -> (usize, usize
 }
 
 #[test]
-#[ignore = "RustDDS 0.15.1's security plugins deliver no user data between the secured node \
-            and the ground station (README, Secured mode: known failure); run with --ignored"]
 fn only_the_authorised_ground_station_commands_the_secured_node() {
     let Some(ks) = keystore("sec_session") else {
         return;
@@ -313,14 +311,44 @@ fn only_the_authorised_ground_station_commands_the_secured_node() {
     .unwrap();
     let gs = GroundStation::new(&settings(d, &ks, Some("ground_station"))).unwrap();
 
-    // 1. The authorised ground station re-targets the node (service).
-    let (stamp, b) = newest_truth(&truth, Duration::from_millis(1500));
-    let resp = gs
-        .reinit(
-            &reinit_request(b, Time::from_nanos(stamp), ""),
-            Duration::from_secs(20),
-        )
-        .expect("the authorised reinit was answered");
+    // 1. The authorised ground station re-targets the node (service). The stamp names
+    // a frame the camera published; under load that frame may still be in flight to
+    // the node (a secured 640x360 image is ~11 datagrams), or no frame has reached it
+    // yet, and the node then refuses with exactly that reason ("no buffered frame has
+    // stamp ...", "no camera frame received yet"). The ground station then asks again
+    // on a frame published 100 ms earlier per attempt, as an operator picking a frame
+    // the node has would; any other refusal fails the test, as does no success in 30 s.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let mut attempt: i64 = 0;
+    let resp = loop {
+        newest_truth(&truth, Duration::from_millis(1500));
+        let (stamp, b) = {
+            let log = truth.lock().unwrap();
+            let newest = *log.keys().next_back().unwrap();
+            let (&stamp, &b) = log
+                .range(..=newest - attempt.min(3) * 100_000_000)
+                .next_back()
+                .unwrap();
+            (stamp, b)
+        };
+        let resp = gs
+            .reinit(
+                &reinit_request(b, Time::from_nanos(stamp), ""),
+                Duration::from_secs(20),
+            )
+            .expect("the authorised reinit was answered");
+        let transient = resp.message.contains("no camera frame")
+            || resp.message.contains("no buffered frame has stamp");
+        if resp.success || !transient || Instant::now() > deadline {
+            break resp;
+        }
+        println!(
+            "security: authorised reinit refused for now ({}); again",
+            resp.message
+        );
+        attempt += 1;
+        std::thread::sleep(Duration::from_millis(300));
+    };
     assert!(resp.success, "{}", resp.message);
     let first_reinit = t0.elapsed();
     let (n, good) = collect(&gs, &truth, Duration::from_secs(2));
@@ -555,4 +583,66 @@ fn start_up_follows_the_ros_security_environment() {
         println!("security: {strategy}, enclave /observer: {}", err.trim());
     }
     let _ = std::fs::remove_dir_all(ks.parent().unwrap());
+}
+
+/// The smallest secured exchanges that failed with RustDDS 0.15.1 as released (README,
+/// Secured mode; `vendor/rustdds/BEVT_PATCH.md`): a `/ground_station` participant
+/// publishes `init` every 100 ms and a `/bevt_node` participant holds `readers`
+/// subscriptions of it; each must receive the sample within 40 s. Unpatched, one reader
+/// got nothing (the footer of every payload whose length is not a multiple of 4 was
+/// misread: "ring ... Unspecified"), and with two readers the writer could encode
+/// nothing at all (both remote readers got one crypto handle). Returns the latest
+/// first-delivery time.
+fn secured_delivery(tag: &str, d: u16, readers: usize) -> Option<Duration> {
+    let ks = keystore(tag)?;
+    let t0 = Instant::now();
+    let rx_settings = settings(d, &ks, Some("bevt_node"));
+    let tx_settings = settings(d, &ks, Some("ground_station"));
+    let rx_ctx = context(&rx_settings).unwrap();
+    let mut rx = rx_ctx
+        .new_node(NodeName::new("/", "rx").unwrap(), NodeOptions::new())
+        .unwrap();
+    let init = ros_name(&rx_settings, names::INIT).unwrap();
+    let det_type = MessageTypeName::new("vision_msgs", "Detection2D");
+    let rx_topic = rx
+        .create_topic(&init, det_type.clone(), &output_qos())
+        .unwrap();
+    let subs: Vec<ros2_client::Subscription<Detection2D>> = (0..readers)
+        .map(|_| rx.create_subscription(&rx_topic, None).unwrap())
+        .collect();
+    let tx_ctx = context(&tx_settings).unwrap();
+    let mut tx = tx_ctx
+        .new_node(NodeName::new("/", "tx").unwrap(), NodeOptions::new())
+        .unwrap();
+    let tx_topic = tx.create_topic(&init, det_type, &output_qos()).unwrap();
+    let publisher: Publisher<Detection2D> = tx.create_publisher(&tx_topic, None).unwrap();
+    let det = detection(BBox::new(10.0, 20.0, 30.0, 40.0), 7);
+    let mut first = vec![None; readers];
+    let end = t0 + Duration::from_secs(40);
+    while Instant::now() < end && first.iter().any(Option::is_none) {
+        let _ = publisher.publish(det.clone());
+        std::thread::sleep(Duration::from_millis(100));
+        for (sub, f) in subs.iter().zip(first.iter_mut()) {
+            while let Ok(Some((msg, _))) = sub.take() {
+                assert_eq!(bbox_from_detection(&msg), bbox_from_detection(&det));
+                f.get_or_insert(t0.elapsed());
+            }
+        }
+    }
+    println!("secured delivery to {readers} reader(s): first samples at {first:?}");
+    assert!(
+        first.iter().all(Option::is_some),
+        "a secured reader received nothing in 40 s: {first:?}"
+    );
+    first.into_iter().flatten().max()
+}
+
+#[test]
+fn a_secured_writer_reaches_one_reader() {
+    secured_delivery("sec_one_reader", domain(2), 1);
+}
+
+#[test]
+fn a_secured_writer_reaches_two_readers_of_one_topic_in_a_participant() {
+    secured_delivery("sec_two_readers", domain(3), 2);
 }

@@ -101,6 +101,16 @@ pub const FALLBACK_MAX_AGGREGATED_DATAGRAM_SIZE: usize = 1452;
 // 1452).
 pub const DATAGRAM_HEADER_OVERHEAD: usize = 48;
 
+// BEVT patch (secured user data, issue 11): octets of the datagram budget kept
+// free when DDS Security is on, for what encoding adds after packing: RTPS
+// protection (SRTPS_PREFIX 24, SecureBody 8 + padding, INFO_SOURCE 24,
+// SRTPS_POSTFIX 24 + 20 per receiver-specific MAC), submessage protection (per
+// submessage: SEC_PREFIX 24, SEC_BODY 8 + padding, SEC_POSTFIX 24 + 20 per MAC)
+// and payload protection (CryptoHeader 20, CryptoContent length 4, CryptoFooter
+// 20, padding 3): ~300 octets for a DATA_FRAG + HEARTBEAT datagram without
+// origin authentication, so 512 leaves room for a few receiver-specific MACs.
+pub const SECURITY_DATAGRAM_RESERVE: usize = 512;
+
 // Constant RTPS fragment size (serialized-payload bytes per fragment) used by
 // the writer when a sample must be sent as DATAFRAG. The RTPS spec requires the
 // fragment size to be fixed for a given Writer and identical for all remote

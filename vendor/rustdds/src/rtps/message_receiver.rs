@@ -934,7 +934,13 @@ impl MessageReceiver {
             if receiver_entity_id == EntityId::UNKNOWN {
               let sending_writer_entity_id = decoded_writer_submessage.sender_entity_id();
 
-              if let Some(target_reader)=self.available_readers.values().find(|target_reader| {
+              // BEVT patch (secured user data, issue 11): give the submessage to *every*
+              // matched reader the decoding approved, as the unprotected path above does.
+              // Upstream 0.15.1 took only the first one (`find`), so of two readers of
+              // a topic in one participant only one ever received data sent to
+              // EntityId::UNKNOWN (a writer's normal sends).
+              let plugins = security_plugins_handle.get_plugins();
+              let target_reader_ids: Vec<EntityId> = self.available_readers.values().filter(|target_reader| {
                 (
                 // Reader must contain the writer
                 target_reader.contains_writer(sending_writer_entity_id)
@@ -949,16 +955,19 @@ impl MessageReceiver {
                       && target_reader.entity_id() == EntityId::P2P_BUILTIN_PARTICIPANT_STATELESS_READER)
                     )
                     &&
-                    security_plugins_handle.get_plugins()
+                    plugins
                     .confirm_local_endpoint_guid(&approved_receiving_datareader_crypto_handles,
                       &GUID { prefix: self.dest_guid_prefix,entity_id: target_reader.entity_id() })
-              }){
-                self.handle_writer_submessage(target_reader.entity_id(), decoded_writer_submessage);
-              }else{
+              }).map(Reader::entity_id).collect();
+              drop(plugins);
+              if target_reader_ids.is_empty() {
                 debug!(
                   "No matching reader found for writer submessage from {sending_writer_entity_id:?} \
                    (receiver entity id is UNKNOWN)"
                 );
+              }
+              for target_reader_id in target_reader_ids {
+                self.handle_writer_submessage(target_reader_id, decoded_writer_submessage.clone());
               }
             } else {
               let receiver_guid = GUID {

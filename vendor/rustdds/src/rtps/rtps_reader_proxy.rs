@@ -402,7 +402,11 @@ impl RtpsReaderProxy {
   /// 3. A guarantee that a datagram built with the larger budget is sent to
   ///    *only* that one locator (today the fallback and multicast-to-all paths
   ///    reuse one datagram across many locators).
-  pub fn resolve_path_mtu(&mut self, local_interfaces: &[IfAddr]) {
+  ///
+  /// BEVT patch (secured user data, issue 11): `reserve` octets are kept free for
+  /// what DDS Security adds after the datagram is built (SRTPS/SEC prefixes, bodies
+  /// and postfixes, the payload's CryptoHeader/Footer); 0 without security.
+  pub fn resolve_path_mtu(&mut self, local_interfaces: &[IfAddr], reserve: usize) {
     let budget = self
       .unicast_locator_list
       .iter()
@@ -410,7 +414,9 @@ impl RtpsReaderProxy {
       .filter(|l| l.is_udp())
       .map(|l| path_mtu_payload_for_peer(local_interfaces, SocketAddr::from(*l).ip()))
       .min();
-    self.max_datagram_payload = budget.unwrap_or(FALLBACK_MAX_AGGREGATED_DATAGRAM_SIZE);
+    self.max_datagram_payload = budget
+      .unwrap_or(FALLBACK_MAX_AGGREGATED_DATAGRAM_SIZE)
+      .saturating_sub(reserve);
   }
 
   pub fn handle_ack_nack(

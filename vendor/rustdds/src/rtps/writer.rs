@@ -31,7 +31,7 @@ use crate::{
       DEFAULT_WRITER_MAX_SAMPLES, FALLBACK_MAX_AGGREGATED_DATAGRAM_SIZE, FRAGMENT_SIZE,
       HEARTBEAT_PERIOD_FAST, HEARTBEAT_PERIOD_SLOW, HEARTBEAT_SUBMESSAGE_SERIALIZED_SIZE,
       NACK_RESPONSE_DELAY, NACK_SUPPRESSION_DURATION, REPAIR_BATCH_MAX_BYTES,
-      REPAIR_INTERVAL_DEFAULT, REPAIR_INTERVAL_MAX, REPAIR_INTERVAL_MIN,
+      REPAIR_INTERVAL_DEFAULT, REPAIR_INTERVAL_MAX, REPAIR_INTERVAL_MIN, SECURITY_DATAGRAM_RESERVE,
     },
     outbound::{SocketId, TrafficClass},
     rtps_reader_proxy::RtpsReaderProxy,
@@ -604,6 +604,19 @@ impl Writer {
     budget
       .saturating_sub(hb_reserve)
       .saturating_sub(DATA_SUBMESSAGE_OVERHEAD)
+  }
+
+  /// BEVT patch (secured user data, issue 11): octets of each datagram kept free for
+  /// DDS Security's encoding, which happens after the datagram is packed to its
+  /// budget. Without it a secured writer packed DATA_FRAGs up to the loopback budget
+  /// and the encoded datagram exceeded the largest UDP payload ("Message too long"),
+  /// so no sample larger than one datagram (a camera image) ever arrived.
+  fn security_datagram_reserve(&self) -> usize {
+    if self.security_plugins.is_some() {
+      SECURITY_DATAGRAM_RESERVE
+    } else {
+      0
+    }
   }
 
   fn num_frags_and_frag_size(&self, payload_size: usize) -> (u32, u16) {
@@ -2072,6 +2085,7 @@ impl Writer {
   // Update the given reader proxy. Preserve data we are tracking.
   // return value: true = reader was new, false = reader was previously known
   fn matched_reader_update(&mut self, updated_reader_proxy: &RtpsReaderProxy) -> bool {
+    let reserve = self.security_datagram_reserve();
     let mut is_new = false;
     let is_volatile = self.qos().is_volatile(); // Get this in advance to work with the borrow checker
                                                 // Capture the interface set once; resolution consults current observations.
@@ -2089,7 +2103,7 @@ impl Writer {
           &multicast_ifaces,
           &selector,
         );
-        rp.resolve_path_mtu(&self.local_interfaces);
+        rp.resolve_path_mtu(&self.local_interfaces, reserve);
       })
       .or_insert_with(|| {
         is_new = true;
@@ -2108,7 +2122,7 @@ impl Writer {
           &multicast_ifaces,
           &selector,
         );
-        new_proxy.resolve_path_mtu(&self.local_interfaces);
+        new_proxy.resolve_path_mtu(&self.local_interfaces, reserve);
         new_proxy
       });
     // A reader was added or its locators changed: refresh the writer-wide
@@ -2134,6 +2148,7 @@ impl Writer {
   /// matched reader belonging to `prefix`. Called when fresh interface
   /// observations for that participant may have arrived (e.g. periodic SPDP).
   pub fn recompute_routes_for(&mut self, prefix: GuidPrefix) {
+    let reserve = self.security_datagram_reserve();
     let multicast_ifaces = self.udp_sender.multicast_interfaces();
     let selector = DefaultRouteSelector::new(self.prefer_loopback_same_host);
     {
@@ -2141,7 +2156,7 @@ impl Writer {
       for rp in self.readers.values_mut() {
         if rp.remote_reader_guid.prefix == prefix {
           rp.resolve_send_route(&observations, &multicast_ifaces, &selector);
-          rp.resolve_path_mtu(&self.local_interfaces);
+          rp.resolve_path_mtu(&self.local_interfaces, reserve);
         }
       }
     }

@@ -270,6 +270,15 @@ impl DataFrag {
     }
 
     let max_payload_bytes = (count_u32 as usize) * (fragment_size as usize);
+    // BEVT patch (secured user data, issue 11): with DDS Security the serializedData
+    // here may still be the *encoded* payload of this run of fragments (RustDDS
+    // encodes each DATA_FRAG's run separately: CryptoHeader 20 + CryptoContent length
+    // 4 + CryptoFooter 20 + up to 3 octets of padding), and upstream 0.15.1 refused
+    // it here, so no secured sample larger than one datagram (a camera image) was ever
+    // received. The exact bound is checked again on the decoded payload
+    // (`MessageReceiver::decode_and_handle_datafrag`).
+    #[cfg(feature = "security")]
+    let max_payload_bytes = max_payload_bytes + 64;
     if datafrag.serialized_payload.len() > max_payload_bytes {
       return Err(io::Error::new(
         io::ErrorKind::InvalidData,

@@ -785,10 +785,8 @@ impl CryptoTransform for CryptographicBuiltin {
       return Err(security_error("Encoded payload smaller than minimum size"));
     }
     let (header_bytes, content_and_footer_bytes) = encoded_buffer.split_at(head_len);
-    let (content_bytes, footer_bytes) =
-      content_and_footer_bytes.split_at(content_and_footer_bytes.len() - foot_len);
 
-    // Deserialize crypto header and footer
+    // Deserialize crypto header
 
     // .read_from_buffer() does not need endianness, because BuiltinCryptoHeader
     // only contains byte-oriented data, which is insensitive to endianness.
@@ -802,8 +800,6 @@ impl CryptoTransform for CryptographicBuiltin {
         },
       builtin_crypto_header_extra: BuiltinCryptoHeaderExtra(initialization_vector),
     } = crypto_header.try_into()?;
-
-    let BuiltinCryptoFooter { common_mac, .. } = BuiltinCryptoFooter::try_from(footer_bytes)?;
 
     // Get the payload decode key material
     let decode_key_material = self.session_decode_crypto_materials(
@@ -826,6 +822,17 @@ impl CryptoTransform for CryptographicBuiltin {
 
     let decode_key = &decode_key_material.session_key;
 
+    // BEVT patch (secured user data, issue 11): the CryptoFooter is NOT always the
+    // last `foot_len` octets of the buffer. A DATA submessage pads its
+    // serializedPayload to a multiple of 4 octets (`Data::write_to`) and the receiver
+    // keeps that padding in the payload (`Data::read_from_buffer_with_ctx`). Upstream
+    // 0.15.1 split the footer off the very end, so whenever the encoded payload was not
+    // 4-aligned (a plaintext length that is not a multiple of 4: most samples) the
+    // footer was read 1-3 octets late, the MAC never matched, and every such sample was
+    // dropped with ring's "Unspecified" error. Now an encrypted payload's CryptoContent
+    // gives its own length and the footer follows it (at most 3 padding octets may
+    // remain after it); a signed-only payload has no length marker, so the splits that
+    // leave 0-3 trailing zero octets are tried and the one whose MAC validates wins.
     match transformation_kind {
       BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_NONE => {
         Err(create_security_error_and_log!(
@@ -835,12 +842,52 @@ impl CryptoTransform for CryptographicBuiltin {
       }
       BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES128_GMAC
       | BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES256_GMAC => {
-        validate_mac(decode_key, initialization_vector, content_bytes, common_mac)
-          // if validate_mac succeeds, then map result to content bytes
-          .map(|()| Vec::from(content_bytes))
+        let total = content_and_footer_bytes.len();
+        let mut first_error = None;
+        for padding in 0..=3 {
+          if total < foot_len + padding
+            || content_and_footer_bytes[total - padding..]
+              .iter()
+              .any(|&b| b != 0)
+          {
+            continue;
+          }
+          let (content_bytes, footer_and_padding) =
+            content_and_footer_bytes.split_at(total - padding - foot_len);
+          let BuiltinCryptoFooter { common_mac, .. } =
+            BuiltinCryptoFooter::try_from(&footer_and_padding[..foot_len])?;
+          match validate_mac(decode_key, initialization_vector, content_bytes, common_mac) {
+            Ok(()) => return Ok(Vec::from(content_bytes)),
+            Err(e) => {
+              first_error.get_or_insert(e);
+            }
+          }
+        }
+        Err(first_error.unwrap_or_else(|| security_error("Encoded payload: no valid footer")))
       }
       BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES128_GCM
       | BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES256_GCM => {
+        let content_len = content_and_footer_bytes
+          .get(..4)
+          .and_then(|b| <[u8; 4]>::try_from(b).ok())
+          .and_then(|b| usize::try_from(u32::from_be_bytes(b)).ok())
+          .and_then(|n| n.checked_add(4))
+          .ok_or_else(|| security_error("Encoded payload: truncated CryptoContent"))?;
+        let padding = content_and_footer_bytes
+          .len()
+          .checked_sub(content_len)
+          .and_then(|rest| rest.checked_sub(foot_len))
+          .ok_or_else(|| {
+            security_error("Encoded payload: CryptoContent longer than the payload")
+          })?;
+        if padding > 3 {
+          return Err(security_error(
+            "Encoded payload: more than 3 octets after the CryptoFooter",
+          ));
+        }
+        let (content_bytes, footer_and_padding) = content_and_footer_bytes.split_at(content_len);
+        let BuiltinCryptoFooter { common_mac, .. } =
+          BuiltinCryptoFooter::try_from(&footer_and_padding[..foot_len])?;
         let ciphertext = CryptoContent::read_from_buffer(content_bytes)?.data;
         decrypt(decode_key, initialization_vector, &ciphertext, common_mac)
       }
