@@ -819,11 +819,16 @@ fn run() -> Result<()> {
         .0
         .map_or(0, |p| total.processed.1.saturating_sub(p));
     println!(
-        "isolation: {} statuses with counters going backwards, {} detections for {} frames the node counted as processed{}",
+        "isolation: {} statuses with counters going backwards, {} detections for {} frames the node counted as processed and {} reinit accepted{}",
         total.foreign,
         total.latencies.len(),
         delta_processed,
-        if total.foreign > 0 || total.latencies.len() as u64 > u64::from(delta_processed) + 2 {
+        total.reinit_ok,
+        // Each accepted reinit also publishes a detection (the reinit frame's) that the
+        // processed counter does not count.
+        if total.foreign > 0
+            || total.latencies.len() as u64 > u64::from(delta_processed) + total.reinit_ok + 2
+        {
             " -- WARNING: a second node answered in this namespace"
         } else {
             " (only this run's node answered)"
