@@ -2,7 +2,7 @@
 # Module evaluation on the dev set: the authors' reference (config/bevt_reference.yaml), each
 # fast-mode addition alone on top of it, all of them together (the default config/bevt.yaml, rows
 # "default*"), then the default with one module changed back at a time, temporal regularisation
-# (admm.temporal) and scale-sample padding on top of it; plus the reference's own modules
+# (admm.temporal), scale-sample padding and the scale filter's 10 fps settings on top of it; plus the reference's own modules
 # (verification, enhanced background learning, beta, grayscale). Accuracy is deterministic;
 # fps is indicative (run on a quiet machine). Prints a Markdown table with the mean over the
 # 7 sequences and over the 6 without the bimodal wakeboard4.
@@ -40,6 +40,18 @@ run default_temporal_2 "${fast[@]}" --set admm.temporal=2
 run default_temporal_5 "${fast[@]}" --set admm.temporal=5
 run default_scale_padding_1.5 "${fast[@]}" --set scale_filter.padding=1.5
 run default_scale_padding_2 "${fast[@]}" --set scale_filter.padding=2
+# The scale filter at 10 fps (README "the scale filter at 10 fps"): fDSST's values back, then
+# each change alone.
+fdsst=(--set scale_filter.step=1.02 --set scale_filter.learning_rate=0.025 --set scale_filter.colornames=false)
+run default_scale_fdsst "${fast[@]}" "${fdsst[@]}"
+run default_scale_fdsst+colornames "${fast[@]}" "${fdsst[@]}" --set scale_filter.colornames=true
+run default_scale_fdsst+lr0.075 "${fast[@]}" "${fdsst[@]}" --set scale_filter.learning_rate=0.075
+run default_scale_fdsst+step1.03 "${fast[@]}" "${fdsst[@]}" --set scale_filter.step=1.03
+run default_scale_no_colornames "${fast[@]}" --set scale_filter.colornames=false
+run default_scale_lr0.025 "${fast[@]}" --set scale_filter.learning_rate=0.025
+run default_scale_lr0.05 "${fast[@]}" --set scale_filter.learning_rate=0.05
+run default_scale_step1.025 "${fast[@]}" --set scale_filter.step=1.025
+run default_scale_step1.035 "${fast[@]}" --set scale_filter.step=1.035
 run ref_no_verification "${ref[@]}" --set verification.enabled=false
 run ref_no_ebl_small_window_no_penalty "${ref[@]}" --set admm.penalty=none --set window.search_area_scale=2.0
 run ref_beta_10 "${ref[@]}" --set admm.beta=10
@@ -52,7 +64,11 @@ names = ["reference", "ref+colornames", "ref+scale_filter", "ref+shifted_sample"
          "default-shifted_sample", "default_penalty_matrix", "default_penalty_none",
          "default_elementwise_kappa3", "default_elementwise_kappa30", "default_temporal_0.5",
          "default_temporal_1", "default_temporal_2", "default_temporal_5",
-         "default_scale_padding_1.5", "default_scale_padding_2", "ref_no_verification",
+         "default_scale_padding_1.5", "default_scale_padding_2", "default_scale_fdsst",
+         "default_scale_fdsst+colornames", "default_scale_fdsst+lr0.075",
+         "default_scale_fdsst+step1.03", "default_scale_no_colornames", "default_scale_lr0.025",
+         "default_scale_lr0.05", "default_scale_step1.025", "default_scale_step1.035",
+         "ref_no_verification",
          "ref_no_ebl_small_window_no_penalty", "ref_beta_10", "ref_without_gray"]
 print("| variant | P@20 | AUC | P@20 / AUC without wakeboard4 | truck4_1 | wakeboard10 | wakeboard7 | fps pooled |")
 print("|---|---|---|---|---|---|---|---|")

@@ -4,8 +4,9 @@
 //! Translation is then detected on one patch per frame; this filter estimates the scale
 //! at the new position from `n` small samples of the target at scales `a^e`
 //! (`e = (k − ⌊n/2⌋)·m/n`, `a` the interpolated step), each resized to a `side × side`
-//! pixel patch and described by fHOG (31 channels per cell). With `x_k ∈ ℝ^d` the feature
-//! vector of scale `k`:
+//! pixel patch and described by fHOG (31 channels per cell; with `colornames`, plus the 10
+//! colour-name channels per cell for colour frames). With `x_k ∈ ℝ^d` the feature vector of
+//! scale `k`:
 //!
 //! - **Model**: `u ← (1−η)u + ηx` (`d × n`); a `d × n` orthonormal basis `P` of `u`'s
 //!   columns (modified Gram–Schmidt, the QR of fDSST) compresses every sample to `n × n`.
@@ -24,7 +25,7 @@
 //! [`ScaleFilter::estimate`] and [`ScaleFilter::train`] allocate nothing.
 
 use crate::error::TrackError;
-use crate::features::{FeatureExtractor, FeatureMap, Hog, HOG_CHANNELS};
+use crate::features::{FeatureExtractor, FeatureMap, Hog};
 use crate::filter::label::hann;
 use crate::geometry::{GridSize, Point2, Size2};
 use crate::image::{Frame, Patch, Sampler, MAX_SAMPLE_ASPECT};
@@ -53,6 +54,9 @@ pub struct ScaleFilterParams {
     pub cell: usize,
     /// Sample extent as a multiple of the target box (fDSST 1).
     pub padding: f32,
+    /// Append the 10 colour-name channels per cell to the samples' fHOG (colour frames
+    /// only; fDSST: HOG only).
+    pub colornames: bool,
 }
 
 /// Smallest norm of a basis vector before it is treated as linearly dependent.
@@ -152,7 +156,10 @@ impl ScaleFilter {
             )));
         }
         let grid = GridSize { h: cells, w: cells };
-        let d = grid.len() * HOG_CHANNELS;
+        let mut hog = Hog::with_colornames(cell, false, p.colornames);
+        hog.set_input_planes(planes);
+        let channels = hog.channels();
+        let d = grid.len() * channels;
         let ratio = m as f32 / n as f32;
         let sample_factors = exponents(n, ratio).map(|e| p.step.powf(e)).collect();
         // Interpolated scales and the label in circularly shifted order (index 0 = no
@@ -188,9 +195,9 @@ impl ScaleFilter {
             interp_factors,
             window: hann(n),
             ysf,
-            hog: Hog::new(cell, false),
+            hog,
             patch: Patch::new(cells * cell, planes),
-            feat: FeatureMap::new(grid, HOG_CHANNELS),
+            feat: FeatureMap::new(grid, channels),
             sampler: Sampler::default(),
             xs: vec![0.0; n * d],
             model: vec![0.0; n * d],
@@ -417,6 +424,7 @@ mod tests {
             sample_side: 24,
             cell: 4,
             padding: 1.0,
+            colornames: false,
         }
     }
 
@@ -456,9 +464,9 @@ mod tests {
         assert!((s - 1.0).abs() < 2e-3, "{s}");
     }
 
-    #[test]
-    fn recovers_a_doubling_of_scale_over_30_frames() {
-        // ×2 over 30 frames (frame 0 → frame 29), position given, scale left to the filter.
+    /// Final scale estimate and truth after a ×2 change over 30 frames (frame 0 → 29), the
+    /// position given, the scale left to the filter.
+    fn track_doubling(p: &ScaleFilterParams) -> (f32, f32) {
         let frames = 30;
         let seq = SynthParams {
             width: 480,
@@ -469,7 +477,7 @@ mod tests {
             path_amplitude: (30.0, 20.0),
             ..SynthParams::default()
         };
-        let mut sf = ScaleFilter::new(&params(), 3).unwrap();
+        let mut sf = ScaleFilter::new(p, 3).unwrap();
         let size0 = seq.frame(0).truth.size();
         let at = |s: f32| Size2 {
             w: size0.w * s,
@@ -485,8 +493,38 @@ mod tests {
         }
         let truth = seq.truth(frames - 1).w / seq.target.0;
         assert!((truth - 2.0).abs() < 1e-3);
+        (scale, truth)
+    }
+
+    #[test]
+    fn recovers_a_doubling_of_scale_over_30_frames() {
+        let (scale, truth) = track_doubling(&params());
         let err = (scale / truth - 1.0).abs();
         assert!(err < 0.03, "estimated ×{scale}, true ×{truth}");
+    }
+
+    #[test]
+    fn recovers_a_doubling_with_colour_names_in_the_samples() {
+        let p = ScaleFilterParams {
+            colornames: true,
+            ..params()
+        };
+        let (scale, truth) = track_doubling(&p);
+        let err = (scale / truth - 1.0).abs();
+        assert!(err < 0.03, "estimated ×{scale}, true ×{truth}");
+    }
+
+    #[test]
+    fn colour_names_add_ten_channels_per_cell_on_colour_frames_only() {
+        let p = ScaleFilterParams {
+            colornames: true,
+            ..params()
+        };
+        let cells = (p.sample_side / p.cell).pow(2);
+        assert_eq!(ScaleFilter::new(&params(), 3).unwrap().d, cells * 31);
+        assert_eq!(ScaleFilter::new(&p, 3).unwrap().d, cells * 41);
+        // mono8: no colour, the group is left out.
+        assert_eq!(ScaleFilter::new(&p, 1).unwrap().d, cells * 31);
     }
 
     #[test]
