@@ -380,6 +380,33 @@ pub struct RedetectionConfig {
     /// Of `windows_per_frame`, how many go to whole-frame template-match proposals each lost
     /// frame (0 = none: only the tile walk).
     pub proposals: usize,
+    /// A learned verifier that searches the frame while lost, besides the filter
+    /// (`none`, or `nanotrack`: cargo feature `cnn` and ONNX Runtime needed).
+    pub verifier: VerifierKind,
+    /// The verifier's backbone (ONNX; NanoTrack v2, any input size).
+    pub verifier_backbone: String,
+    /// The verifier's correlation head (ONNX).
+    pub verifier_head: String,
+    /// Verifier network passes per lost frame (the time bound of the verifier; one pass
+    /// is one backbone run on a 255×255 search crop plus one head run).
+    pub verifier_windows: usize,
+    /// Scales of the verifier's whole-frame tiles, relative to the target scale when it was
+    /// lost.
+    pub verifier_scales: Vec<f32>,
+    /// Foreground logit margin (head classification, foreground − background) at or above
+    /// which a verifier hit is a candidate.
+    pub verifier_threshold: f32,
+}
+
+/// The learned re-detection verifier (`redetection.verifier`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum VerifierKind {
+    /// No verifier: the frozen filter decides alone.
+    #[default]
+    None,
+    /// NanoTrack v2's backbone and head, template from the initial frame.
+    Nanotrack,
 }
 
 impl Default for RedetectionConfig {
@@ -393,6 +420,12 @@ impl Default for RedetectionConfig {
             reacquire_relative: 0.5,
             reacquire_frames: 3,
             proposals: 4,
+            verifier: VerifierKind::None,
+            verifier_backbone: String::new(),
+            verifier_head: String::new(),
+            verifier_windows: 16,
+            verifier_scales: vec![1.0, 0.7],
+            verifier_threshold: 5.0,
         }
     }
 }
@@ -1000,6 +1033,35 @@ impl TrackerConfig {
             "redetection.proposals",
             r.proposals,
             "0..=windows_per_frame",
+        )?;
+        check(
+            (1..=MAX_WINDOWS_PER_FRAME).contains(&r.verifier_windows),
+            "redetection.verifier_windows",
+            r.verifier_windows,
+            "1..=256 passes",
+        )?;
+        check(
+            !r.verifier_scales.is_empty()
+                && r.verifier_scales.len() <= MAX_REDETECT_SCALES
+                && r.verifier_scales
+                    .iter()
+                    .all(|s| s.is_finite() && (0.25..=4.0).contains(s)),
+            "redetection.verifier_scales",
+            format!("{:?}", r.verifier_scales),
+            "1 to 8 factors in [0.25, 4]",
+        )?;
+        check(
+            r.verifier_threshold.is_finite() && r.verifier_threshold.abs() <= 100.0,
+            "redetection.verifier_threshold",
+            r.verifier_threshold,
+            "a logit margin in [-100, 100]",
+        )?;
+        check(
+            r.verifier == VerifierKind::None
+                || (!r.verifier_backbone.is_empty() && !r.verifier_head.is_empty()),
+            "redetection.verifier_backbone",
+            format!("{:?} / {:?}", r.verifier_backbone, r.verifier_head),
+            "both model paths when redetection.verifier is not none",
         )?;
         check(
             (1..=256).contains(&self.threads),

@@ -47,6 +47,8 @@ pub mod filter;
 pub mod geometry;
 pub mod image;
 pub mod redetect;
+#[cfg(feature = "cnn")]
+pub mod redetect_nano;
 pub mod scale;
 pub mod scale_filter;
 pub mod track_state;

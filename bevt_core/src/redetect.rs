@@ -28,8 +28,57 @@
 //! dropped. The track is taken back only when one candidate has been confident for
 //! `reacquire_frames` frames in a row, so a brief look-alike does not steal the track.
 
+use crate::error::TrackError;
 use crate::geometry::Point2;
 use crate::image::Frame;
+
+/// The best hit of a learned verifier in one search region.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VerifierHit {
+    /// Centre of the predicted box, image pixels.
+    pub pos: Point2,
+    /// Size of the predicted box, image pixels.
+    pub w: f32,
+    /// Height of the predicted box, image pixels.
+    pub h: f32,
+    /// The verifier's score (NanoTrack: foreground logit margin).
+    pub score: f32,
+}
+
+/// NanoTrack's template context side for a `w × h` target: `√((w+p)(h+p))`, `p = (w+h)/2`
+/// (a verifier's search region is twice this).
+pub fn context_side(w: f32, h: f32) -> f32 {
+    let p = 0.5 * (w + h);
+    ((w + p) * (h + p)).sqrt()
+}
+
+/// A learned re-detection verifier (`redetection.verifier`): scores search regions against
+/// a template of the target taken on the initial frame.
+pub trait Verifier: Send + std::fmt::Debug {
+    /// Takes the target (`w × h` pixels at `center` of `frame`) as the template.
+    ///
+    /// # Errors
+    /// [`TrackError::Feature`] when the network fails.
+    fn set_template(
+        &mut self,
+        frame: &Frame<'_>,
+        center: Point2,
+        w: f32,
+        h: f32,
+    ) -> Result<(), TrackError>;
+
+    /// The best hit in the square search region of side `side` pixels at `center`, for a
+    /// target whose template context side is `side / 2`; `None` without a template.
+    ///
+    /// # Errors
+    /// [`TrackError::Feature`] when the network fails.
+    fn search(
+        &mut self,
+        frame: &Frame<'_>,
+        center: Point2,
+        side: f32,
+    ) -> Result<Option<VerifierHit>, TrackError>;
+}
 
 /// Upper bound on the tiles of one plan (per scale); the stride grows to respect it.
 pub const MAX_TILES: usize = 1024;

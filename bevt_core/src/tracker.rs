@@ -6,7 +6,9 @@
 mod lost;
 
 use crate::confidence::{psr, ConfidenceModel, Measures};
-use crate::config::{FeatureKind, ScaleEstimator, TrackerConfig, TrackerSpec, TrainingSample};
+use crate::config::{
+    FeatureKind, ScaleEstimator, TrackerConfig, TrackerSpec, TrainingSample, VerifierKind,
+};
 use crate::error::ConfigError;
 use crate::error::TrackError;
 use crate::features::{FeatureExtractor, FeatureMap, Hog};
@@ -18,6 +20,7 @@ use crate::filter::response::{fused_response, LayerSlot};
 use crate::filter::shift::{apply_phase, shift_phase};
 use crate::geometry::{BBox, GridSize, Point2, Size2};
 use crate::image::{Frame, Patch, PixelFormat, Sampler};
+use crate::redetect::Verifier;
 use crate::scale::{scale_factors, scale_limits};
 use crate::scale_filter::ScaleFilter;
 use crate::track_state::{StateMachine, StateReason, TrackState};
@@ -379,6 +382,8 @@ pub struct BevtTracker {
     spec: TrackerSpec,
     /// Built by the constructor, or at the first `init` for extractors that load a model.
     extractor: Option<Box<dyn FeatureExtractor>>,
+    /// The learned re-detection verifier (`redetection.verifier`), built at the first `init`.
+    verifier: Option<Box<dyn Verifier>>,
     state: Option<Box<State>>,
 }
 
@@ -403,6 +408,7 @@ impl BevtTracker {
         Self {
             spec,
             extractor,
+            verifier: None,
             state: None,
         }
     }
@@ -442,11 +448,42 @@ impl BevtTracker {
         }
     }
 
+    /// The re-detection verifier `spec` names (`None` for `redetection.verifier: none`).
+    fn build_verifier(spec: &TrackerSpec) -> Result<Option<Box<dyn Verifier>>, TrackError> {
+        let r = &spec.config.redetection;
+        match r.verifier {
+            VerifierKind::None => Ok(None),
+            #[cfg(feature = "cnn")]
+            VerifierKind::Nanotrack => {
+                let runtime = spec
+                    .config
+                    .features
+                    .cnn
+                    .as_ref()
+                    .map_or("", |c| c.runtime.as_str());
+                let v = crate::redetect_nano::NanoVerifier::new(
+                    runtime,
+                    &r.verifier_backbone,
+                    &r.verifier_head,
+                )
+                .map_err(|e| TrackError::Feature(format!("redetection.verifier: {e}")))?;
+                Ok(Some(Box::new(v)))
+            }
+            #[cfg(not(feature = "cnn"))]
+            VerifierKind::Nanotrack => Err(TrackError::Feature(
+                "redetection.verifier is nanotrack but bevt_core was built without the `cnn` \
+                 cargo feature (build with --features cnn, or set redetection.verifier: none)"
+                    .into(),
+            )),
+        }
+    }
+
     /// A tracker with a custom feature extractor.
     pub fn with_extractor(spec: TrackerSpec, extractor: Box<dyn FeatureExtractor>) -> Self {
         Self {
             spec,
             extractor: Some(extractor),
+            verifier: None,
             state: None,
         }
     }
@@ -758,7 +795,13 @@ impl Tracker for BevtTracker {
             .extractor
             .as_deref()
             .ok_or_else(|| TrackError::Feature("no feature extractor".into()))?;
+        if self.verifier.is_none() {
+            self.verifier = Self::build_verifier(&self.spec)?;
+        }
         let mut st = self.build(ex, frame, bbox)?;
+        if let Some(v) = self.verifier.as_deref_mut() {
+            v.set_template(frame, bbox.center(), bbox.w, bbox.h)?;
+        }
         st.training_sample(frame)?;
         st.model_xf.copy_from_slice(&st.workers[0].xf);
         st.train();
@@ -787,7 +830,7 @@ impl Tracker for BevtTracker {
             });
         }
         if st.states.state() == TrackState::Lost {
-            return lost::search(st, frame, &self.spec);
+            return lost::search(st, frame, &self.spec, self.verifier.as_deref_mut());
         }
         // Detection over all scales around the previous position.
         let side = st.geo.patch_side as f32;

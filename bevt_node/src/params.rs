@@ -92,10 +92,26 @@ pub fn load_config(path: Option<&Path>, overrides: &[String]) -> Result<TrackerS
     Ok(cfg.validate()?)
 }
 
-/// Makes the relative file paths of `features.cnn` (`model`, `runtime`) in a config file
+/// Makes the relative file paths of `features.cnn` (`model`, `runtime`) and of the
+/// re-detection verifier (`redetection.verifier_backbone`, `verifier_head`) in a config file
 /// relative to the file's folder, so presets work from any working directory. Paths given by
 /// `--set` overrides stay relative to the working directory.
 fn resolve_cnn_paths(value: &mut serde_norway::Value, dir: &Path) {
+    if let Some(r) = value
+        .get_mut("redetection")
+        .and_then(|r| r.as_mapping_mut())
+    {
+        for key in ["verifier_backbone", "verifier_head"] {
+            if let Some(v) = r.get_mut(key) {
+                if let Some(p) = v
+                    .as_str()
+                    .filter(|p| !p.is_empty() && Path::new(p).is_relative())
+                {
+                    *v = serde_norway::Value::String(dir.join(p).display().to_string());
+                }
+            }
+        }
+    }
     let Some(cnn) = value
         .get_mut("features")
         .and_then(|f| f.get_mut("cnn"))

@@ -615,3 +615,148 @@ fn a_file_that_is_not_onnx_runtime_is_an_error_at_init() {
     assert!(stdout.contains("1 passed"), "{stdout}");
     assert!(stdout.contains("child: features.cnn.runtime"), "{stdout}");
 }
+
+/// A small target on a large frame that leaves the view and re-enters at the far side
+/// (as `lost.rs`'s `far_reentry`; hidden frames 30–49).
+fn far_reentry() -> bevt_core::eval::synth::SynthParams {
+    bevt_core::eval::synth::SynthParams {
+        width: 960,
+        height: 540,
+        frames: 90,
+        target: (28.0, 24.0),
+        scale_rate: 1.0,
+        path_amplitude: (30.0, 20.0),
+        camera_velocity: (0.5, -0.3),
+        hidden: Some((30, 50)),
+        reappear_offset: (-380.0, 200.0),
+        ..SynthParams::default()
+    }
+}
+
+/// Frame of the first `reacquired` state at or after frame 50, tracking `seq` with `cfg`.
+fn reacquired_at(
+    seq: &bevt_core::eval::synth::SynthParams,
+    cfg: TrackerConfig,
+) -> (
+    Option<usize>,
+    Vec<(bevt_core::TrackOutput, bevt_core::BBox)>,
+) {
+    let r = bevt_tests::track_synthetic(seq, cfg, seq.truth(0));
+    let back = (50..seq.frames).find(|&t| r[t - 1].0.state == bevt_core::TrackState::Reacquired);
+    (back, r)
+}
+
+/// `redetection.verifier: nanotrack` with the shipped NanoTrack v2 backbone and head: the
+/// target re-entering far away is re-acquired by the verifier's whole-frame tiles alone (the
+/// filter's proposals off) within 25 frames of its return (the tiles cycle over the frame in
+/// ~30 lost frames here), where without the verifier it is not re-acquired at all.
+#[test]
+fn nanotrack_verifier_reacquires_a_far_reentry_the_filter_alone_misses() {
+    let Some(_rt) = runtime("nanotrack_verifier_reacquires_a_far_reentry_the_filter_alone_misses")
+    else {
+        return;
+    };
+    let seq = far_reentry();
+    let mut cfg = TrackerConfig::default();
+    cfg.redetection.proposals = 0;
+    let (back, _) = reacquired_at(&seq, cfg.clone());
+    assert!(
+        back.is_none_or(|t| t > 60),
+        "without the verifier: {back:?}"
+    );
+    cfg.redetection.verifier = bevt_core::config::VerifierKind::Nanotrack;
+    cfg.redetection.verifier_backbone = model("nanotrack/nanotrackv2_backbone_sim_dyn.onnx");
+    cfg.redetection.verifier_head = model("nanotrack/nanotrackv2_head_sim.onnx");
+    let (back, r) = reacquired_at(&seq, cfg);
+    println!("verifier: re-acquired at {back:?}");
+    let back = back.expect("the verifier never re-acquired the target");
+    assert!(back <= 75, "re-acquired at frame {back}");
+    for t in back..seq.frames {
+        let (o, truth) = &r[t - 1];
+        let e = o.bbox.center().distance(&truth.center());
+        assert!(e < 8.0, "frame {t}: centre error {e}");
+    }
+}
+
+/// A verifier whose models are missing is a clear error at construction, naming the key.
+#[test]
+fn nanotrack_verifier_with_a_missing_head_is_an_error() {
+    let Some(_rt) = runtime("nanotrack_verifier_with_a_missing_head_is_an_error") else {
+        return;
+    };
+    let mut cfg = TrackerConfig::default();
+    cfg.redetection.verifier = bevt_core::config::VerifierKind::Nanotrack;
+    cfg.redetection.verifier_backbone = model("nanotrack/nanotrackv2_backbone_sim_dyn.onnx");
+    cfg.redetection.verifier_head = model("nanotrack/no_such_head.onnx");
+    let seq = far_reentry();
+    let f0 = seq.frame(0);
+    let mut t = BevtTracker::new(cfg.validate().unwrap());
+    let frame = Frame::packed(&f0.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+    let err = t.init(&frame, seq.truth(0)).unwrap_err().to_string();
+    assert!(
+        err.contains("redetection.verifier") && err.contains("no_such_head"),
+        "{err}"
+    );
+}
+
+/// Stated behaviour with the verifier: the look-alike of `lost.rs` (the target's size, rim
+/// and colours, another texture; shown at (120, 250) while the target is hidden, frames
+/// 30–49) **is taken** (NanoTrack scores it like the target; without the verifier it is
+/// not, `lost.rs`), then **released**: the filter, frozen from the real target, finds it
+/// unconfident, the track is lost again after `lost_frames`, and the real target is
+/// re-acquired where it reappeared and kept to the end.
+#[test]
+fn nanotrack_verifier_takes_the_look_alike_then_releases_it_for_the_target() {
+    let Some(_rt) =
+        runtime("nanotrack_verifier_takes_the_look_alike_then_releases_it_for_the_target")
+    else {
+        return;
+    };
+    let seq = bevt_core::eval::synth::SynthParams {
+        width: 480,
+        height: 360,
+        frames: 90,
+        target: (48.0, 40.0),
+        scale_rate: 1.0,
+        path_amplitude: (30.0, 20.0),
+        camera_velocity: (0.5, -0.3),
+        hidden: Some((30, 50)),
+        reappear_offset: (140.0, 70.0),
+        distractor: Some(bevt_core::eval::synth::Distractor {
+            center: (120.0, 250.0),
+            seed: 1234,
+        }),
+        ..SynthParams::default()
+    };
+    let mut cfg = TrackerConfig::default();
+    cfg.redetection.verifier = bevt_core::config::VerifierKind::Nanotrack;
+    cfg.redetection.verifier_backbone = model("nanotrack/nanotrackv2_backbone_sim_dyn.onnx");
+    cfg.redetection.verifier_head = model("nanotrack/nanotrackv2_head_sim.onnx");
+    let r = bevt_tests::track_synthetic(&seq, cfg, seq.truth(0));
+    let states: Vec<_> = r.iter().map(|(o, _)| o.state).collect();
+    println!("{states:?}");
+    let reacq = |range: std::ops::Range<usize>| {
+        range
+            .filter(|&t| r[t - 1].0.state == bevt_core::TrackState::Reacquired)
+            .collect::<Vec<_>>()
+    };
+    let on_look_alike = |t: usize| {
+        let c = r[t - 1].0.bbox.center();
+        (c.x - 120.0).abs() < 20.0 && (c.y - 250.0).abs() < 20.0
+    };
+    let taken = reacq(30..50);
+    assert!(
+        taken.iter().any(|&t| on_look_alike(t)),
+        "look-alike not taken: {taken:?}"
+    );
+    let back = reacq(50..seq.frames)
+        .into_iter()
+        .find(|&t| !on_look_alike(t))
+        .expect("the target was never re-acquired");
+    assert!(back <= 75, "re-acquired at frame {back}");
+    for t in back..seq.frames {
+        let (o, truth) = &r[t - 1];
+        let e = o.bbox.center().distance(&truth.center());
+        assert!(e < 8.0, "frame {t}: centre error {e}");
+    }
+}

@@ -8,7 +8,8 @@ use crate::error::TrackError;
 use crate::geometry::Point2;
 use crate::image::Frame;
 use crate::redetect::{
-    candidate_threshold, propose, Appearance, CandidateTracker, ProposalScratch, SearchPlan,
+    candidate_threshold, context_side, propose, Appearance, Candidate, CandidateTracker,
+    ProposalScratch, RedetectParams, SearchPlan, Verifier, VerifierHit,
 };
 use crate::tracker::TrackOutput;
 use rustfft::num_complex::Complex32;
@@ -19,6 +20,12 @@ const CANDIDATE_NEAR_CELLS: f32 = 3.0;
 const APPEARANCE_RATE: f32 = 0.05;
 /// Consensus reported while lost (no response is compared with the ideal model).
 const LOST_CONSENSUS: f32 = 0.0;
+/// Spacing of the verifier's tiles, fraction of its search region (the head's grid covers
+/// the whole crop).
+const VERIFIER_TILE_STRIDE: f32 = 0.75;
+/// A verifier hit within this fraction of the context side of the verifier's candidate is
+/// the candidate.
+const VERIFIER_NEAR: f32 = 0.5;
 
 /// What the tracker keeps for, and while, being lost.
 #[derive(Debug, Default)]
@@ -41,6 +48,9 @@ pub(super) struct LostState {
     /// The re-detection template, kept from confident frames, and the proposal buffers.
     appearance: Appearance,
     scratch: ProposalScratch,
+    /// The learned verifier's whole-frame tiles and its own candidate.
+    vplan: SearchPlan,
+    vcand: CandidateTracker,
 }
 
 /// Side of the square the re-detection template covers at `scale`, pixels.
@@ -90,6 +100,72 @@ pub(super) fn enter(st: &mut State, spec: &TrackerSpec) {
         st.geo.patch_side as f32 * st.scale,
         &spec.redetect,
     );
+    let r = &spec.config.redetection;
+    let vparams = RedetectParams {
+        scales: r.verifier_scales.clone(),
+        tile_stride: VERIFIER_TILE_STRIDE,
+        ..spec.redetect.clone()
+    };
+    let vside = 2.0 * verifier_side(st, st.scale);
+    st.lost.vcand.clear();
+    st.lost.vplan = SearchPlan::new(st.pos, st.frame_w, st.frame_h, vside, &vparams);
+}
+
+/// The verifier's template context side at absolute `scale`, pixels.
+fn verifier_side(st: &State, scale: f32) -> f32 {
+    context_side(st.geo.base_target.w * scale, st.geo.base_target.h * scale)
+}
+
+/// The absolute tracker scale of a verifier hit's box.
+fn hit_scale(st: &State, hit: &VerifierHit) -> f32 {
+    let base = (st.geo.base_target.w * st.geo.base_target.h).sqrt();
+    let s = (hit.w * hit.h).sqrt() / base.max(f32::EPSILON);
+    if s.is_finite() {
+        s.clamp(st.min_scale, st.max_scale)
+    } else {
+        st.lost.scale_at_loss
+    }
+}
+
+/// One lost frame of the learned verifier: follow its candidate, spend the rest of
+/// `verifier_windows` on the whole-frame tiles; the candidate once it has been above
+/// `verifier_threshold` for `reacquire_frames` frames in a row.
+fn verify(
+    st: &mut State,
+    frame: &Frame<'_>,
+    spec: &TrackerSpec,
+    v: &mut dyn Verifier,
+) -> Result<Option<Candidate>, TrackError> {
+    let r = &spec.config.redetection;
+    let thr = r.verifier_threshold;
+    let near = VERIFIER_NEAR * verifier_side(st, st.lost.scale_at_loss);
+    st.lost.vcand.begin_frame(near);
+    let mut passes = r.verifier_windows;
+    if let Some(c) = st.lost.vcand.current() {
+        let hit = v.search(frame, c.pos, 2.0 * verifier_side(st, c.scale))?;
+        match hit {
+            Some(h) => {
+                let scale = hit_scale(st, &h);
+                st.lost.vcand.followed(h.pos, scale, h.score, thr);
+            }
+            None => st
+                .lost
+                .vcand
+                .followed(c.pos, c.scale, f32::NEG_INFINITY, thr),
+        }
+        passes = passes.saturating_sub(1);
+    }
+    for _ in 0..passes {
+        let Some(w) = st.lost.vplan.next_window() else {
+            break;
+        };
+        let scale = st.lost.scale_at_loss * w.scale;
+        if let Some(h) = v.search(frame, w.center, 2.0 * verifier_side(st, scale))? {
+            let scale = hit_scale(st, &h);
+            st.lost.vcand.offer(h.pos, scale, h.score, thr);
+        }
+    }
+    Ok(st.lost.vcand.end_frame(spec.redetect.reacquire_frames))
 }
 
 /// One search window at `center` and absolute `scale`: the position the frozen filter
@@ -148,6 +224,7 @@ pub(super) fn search(
     st: &mut State,
     frame: &Frame<'_>,
     spec: &TrackerSpec,
+    verifier: Option<&mut (dyn Verifier + 'static)>,
 ) -> Result<TrackOutput, TrackError> {
     let p = &spec.redetect;
     let threshold = st.lost.threshold;
@@ -209,10 +286,21 @@ pub(super) fn search(
         }
         st.lost.candidates.offer(pos, scale, conf, threshold);
     }
-    if let Some(c) = st.lost.candidates.end_frame(p.reacquire_frames) {
+    let accepted = match st.lost.candidates.end_frame(p.reacquire_frames) {
+        Some(c) => Some(c),
+        None => match verifier {
+            Some(v) if p.enabled => verify(st, frame, spec, v)?.map(|c| Candidate {
+                confidence: best.0.max(st.lost.threshold),
+                ..c
+            }),
+            _ => None,
+        },
+    };
+    if let Some(c) = accepted {
         st.pos = c.pos;
         st.scale = c.scale;
         st.lost.candidates.clear();
+        st.lost.vcand.clear();
         let (state, reason) = st.states.reacquired();
         return Ok(BevtTracker::output_at(
             st,
