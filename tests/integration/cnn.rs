@@ -616,23 +616,6 @@ fn a_file_that_is_not_onnx_runtime_is_an_error_at_init() {
     assert!(stdout.contains("child: features.cnn.runtime"), "{stdout}");
 }
 
-/// A small target on a large frame that leaves the view and re-enters at the far side
-/// (as `lost.rs`'s `far_reentry`; hidden frames 30–49).
-fn far_reentry() -> bevt_core::eval::synth::SynthParams {
-    bevt_core::eval::synth::SynthParams {
-        width: 960,
-        height: 540,
-        frames: 90,
-        target: (28.0, 24.0),
-        scale_rate: 1.0,
-        path_amplitude: (30.0, 20.0),
-        camera_velocity: (0.5, -0.3),
-        hidden: Some((30, 50)),
-        reappear_offset: (-380.0, 200.0),
-        ..SynthParams::default()
-    }
-}
-
 /// Frame of the first `reacquired` state at or after frame 50, tracking `seq` with `cfg`.
 fn reacquired_at(
     seq: &bevt_core::eval::synth::SynthParams,
@@ -656,7 +639,7 @@ fn nanotrack_verifier_reacquires_a_far_reentry_the_filter_alone_misses() {
     else {
         return;
     };
-    let seq = far_reentry();
+    let seq = bevt_tests::scenes::far_reentry();
     let mut cfg = TrackerConfig::default();
     cfg.redetection.proposals = 0;
     let (back, _) = reacquired_at(&seq, cfg.clone());
@@ -688,7 +671,7 @@ fn nanotrack_verifier_with_a_missing_head_is_an_error() {
     cfg.redetection.verifier = bevt_core::config::VerifierKind::Nanotrack;
     cfg.redetection.verifier_backbone = model("nanotrack/nanotrackv2_backbone_sim_dyn.onnx");
     cfg.redetection.verifier_head = model("nanotrack/no_such_head.onnx");
-    let seq = far_reentry();
+    let seq = bevt_tests::scenes::far_reentry();
     let f0 = seq.frame(0);
     let mut t = BevtTracker::new(cfg.validate().unwrap());
     let frame = Frame::packed(&f0.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
@@ -712,22 +695,7 @@ fn nanotrack_verifier_takes_the_look_alike_then_releases_it_for_the_target() {
     else {
         return;
     };
-    let seq = bevt_core::eval::synth::SynthParams {
-        width: 480,
-        height: 360,
-        frames: 90,
-        target: (48.0, 40.0),
-        scale_rate: 1.0,
-        path_amplitude: (30.0, 20.0),
-        camera_velocity: (0.5, -0.3),
-        hidden: Some((30, 50)),
-        reappear_offset: (140.0, 70.0),
-        distractor: Some(bevt_core::eval::synth::Distractor {
-            center: (120.0, 250.0),
-            seed: 1234,
-        }),
-        ..SynthParams::default()
-    };
+    let seq = bevt_tests::scenes::with_look_alike();
     let mut cfg = TrackerConfig::default();
     cfg.redetection.verifier = bevt_core::config::VerifierKind::Nanotrack;
     cfg.redetection.verifier_backbone = model("nanotrack/nanotrackv2_backbone_sim_dyn.onnx");

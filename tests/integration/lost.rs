@@ -1,28 +1,9 @@
 //! Losing and re-acquiring the target (issue 8) on synthetic sequences generated here: the
 //! target is hidden for some frames and reappears elsewhere in the frame.
 
-use bevt_core::eval::synth::{Distractor, SynthParams};
 use bevt_core::{TrackState, TrackerConfig};
+use bevt_tests::scenes::{far_reentry, occluded, with_look_alike, HIDE, SHOW};
 use bevt_tests::track_synthetic;
-
-/// Hidden frames `[HIDE, SHOW)`.
-const HIDE: usize = 30;
-const SHOW: usize = 50;
-
-fn occluded() -> SynthParams {
-    SynthParams {
-        width: 480,
-        height: 360,
-        frames: 90,
-        target: (48.0, 40.0),
-        scale_rate: 1.0,
-        path_amplitude: (30.0, 20.0),
-        camera_velocity: (0.5, -0.3),
-        hidden: Some((HIDE, SHOW)),
-        reappear_offset: (140.0, 70.0),
-        ..SynthParams::default()
-    }
-}
 
 /// Index into the per-frame results of sequence frame `t` (results start at frame 1).
 fn at(t: usize) -> usize {
@@ -68,16 +49,6 @@ fn hidden_target_is_lost_then_reacquired_where_it_reappears() {
         .reason
         .to_string()
         .starts_with("re-acquired after"));
-}
-
-fn with_look_alike() -> SynthParams {
-    SynthParams {
-        distractor: Some(Distractor {
-            center: (120.0, 250.0),
-            seed: 1234,
-        }),
-        ..occluded()
-    }
 }
 
 /// Asserts the stated behaviour: the track stays lost while only the look-alike is visible
@@ -162,22 +133,6 @@ fn reference() -> TrackerConfig {
     cfg.learning.training_sample = TrainingSample::Fresh;
     cfg.admm.penalty = PenaltyKind::Matrix;
     cfg
-}
-
-/// A large frame, a small target that leaves the view and re-enters at the far side.
-fn far_reentry() -> SynthParams {
-    SynthParams {
-        width: 960,
-        height: 540,
-        frames: 90,
-        target: (28.0, 24.0),
-        scale_rate: 1.0,
-        path_amplitude: (30.0, 20.0),
-        camera_velocity: (0.5, -0.3),
-        hidden: Some((HIDE, SHOW)),
-        reappear_offset: (-380.0, 200.0),
-        ..SynthParams::default()
-    }
 }
 
 #[test]

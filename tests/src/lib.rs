@@ -3,6 +3,7 @@
 #![allow(clippy::expect_used)] // test-support crate: a failed setup should abort the test
 
 pub mod fuzz;
+pub mod scenes;
 
 use bevt_core::eval::synth::SynthParams;
 use bevt_core::{BBox, BevtTracker, Frame, PixelFormat, TrackOutput, Tracker, TrackerConfig};
