@@ -529,7 +529,7 @@ fn tracker_reports_a_bad_cnn_model_at_init_and_never_falls_back_to_hog() {
 
 #[test]
 fn cnn_presets_parse_and_validate() {
-    use bevt_core::config::{ScaleEstimator, TrainingSample};
+    use bevt_core::config::{ScaleEstimator, TrainingSample, VerifierKind};
     let defaults = TrackerConfig::default();
     for p in [
         "cnn_fusion",
@@ -552,8 +552,20 @@ fn cnn_presets_parse_and_validate() {
         admm.penalty = defaults.admm.penalty;
         assert_eq!(admm, defaults.admm, "{p}");
         assert_eq!(c.confidence, defaults.confidence, "{p}");
-        assert_eq!(c.redetection, defaults.redetection, "{p}");
         let one_pass = matches!(p, "cnn_fusion" | "cnn_nanotrack");
+        // The one-pass presets add the NanoTrack re-detection verifier with the shipped
+        // models; every other re-detection key is the default's.
+        let mut redetection = c.redetection.clone();
+        if one_pass {
+            assert_eq!(redetection.verifier, VerifierKind::Nanotrack, "{p}");
+            for m in [&redetection.verifier_backbone, &redetection.verifier_head] {
+                assert!(std::path::Path::new(m).is_file(), "{p}: {m} is not shipped");
+            }
+            redetection.verifier = defaults.redetection.verifier;
+            redetection.verifier_backbone = defaults.redetection.verifier_backbone.clone();
+            redetection.verifier_head = defaults.redetection.verifier_head.clone();
+        }
+        assert_eq!(redetection, defaults.redetection, "{p}");
         assert_eq!(
             c.detection.scale_estimator == ScaleEstimator::Filter,
             one_pass,
