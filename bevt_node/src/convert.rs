@@ -358,6 +358,23 @@ pub fn frame_from_compressed_view<'a>(
         .map_err(|e| ConvertError::Malformed(e.to_string()))
 }
 
+/// `vision_msgs/BoundingBox2D` of box `b`: its centre, no rotation, its size (inverse of
+/// the box part of [`bbox_from_detection`]).
+pub fn bbox_2d(b: BBox) -> BoundingBox2D {
+    let c = b.center();
+    BoundingBox2D {
+        center: Pose2D {
+            position: Point2D {
+                x: c.x as f64,
+                y: c.y as f64,
+            },
+            theta: 0.0,
+        },
+        size_x: b.w as f64,
+        size_y: b.h as f64,
+    }
+}
+
 /// `vision_msgs/Detection2DArray` for one tracker output: the box (centre, size), the
 /// confidence as the hypothesis score, the track id as `id`; no detection while the target
 /// is lost (the ROS convention: no detection rather than a wrong one).
@@ -370,7 +387,6 @@ pub fn detections_from_output(
     let detections = out
         .filter(|o| o.state != TrackState::Lost)
         .map(|o| {
-            let c = o.bbox.center();
             vec![Detection2D {
                 header: header.clone(),
                 results: vec![ObjectHypothesisWithPose {
@@ -380,17 +396,7 @@ pub fn detections_from_output(
                     },
                     pose: PoseWithCovariance::default(),
                 }],
-                bbox: BoundingBox2D {
-                    center: Pose2D {
-                        position: Point2D {
-                            x: c.x as f64,
-                            y: c.y as f64,
-                        },
-                        theta: 0.0,
-                    },
-                    size_x: o.bbox.w as f64,
-                    size_y: o.bbox.h as f64,
-                },
+                bbox: bbox_2d(o.bbox),
                 id: track_id.to_string(),
             }]
         })
@@ -728,6 +734,9 @@ mod tests {
         let d = detections_from_output(&Header::default(), Some(&out), 3, "target");
         assert_eq!(d.detections.len(), 1);
         assert_eq!(bbox_from_detection(&d.detections[0]), out.bbox);
+        let b = &d.detections[0].bbox;
+        assert_eq!((b.center.position.x, b.center.position.y), (25.0, 40.0));
+        assert_eq!((b.size_x, b.size_y, b.center.theta), (30.0, 40.0, 0.0));
         assert!((d.detections[0].results[0].hypothesis.score - 0.9).abs() < 1e-6);
         assert_eq!(d.detections[0].id, "3");
         assert!(detections_from_output(&Header::default(), None, 3, "t")

@@ -269,7 +269,8 @@ mod topics_and_bad_input {
     use super::*;
     use bevt_msgs::bevt::TrackStatus;
     use bevt_msgs::sensor_msgs::CompressedImage;
-    use bevt_msgs::vision_msgs::{BoundingBox2D, Detection2D, Point2D, Pose2D};
+    use bevt_msgs::vision_msgs::Detection2D;
+    use bevt_node::convert::bbox_2d;
     use bevt_node::node::sim::{wall_stamp, RawPeer};
     use bevt_tests::{synth_image as image, wait_status};
 
@@ -304,20 +305,9 @@ mod topics_and_bad_input {
             assert!(Instant::now() < end, "the node never reported frame 0");
         }
         // Initialise through the init topic, on frame 0's stamp.
-        let c = t0.center();
         let det = Detection2D {
             header: m0.header.clone(),
-            bbox: BoundingBox2D {
-                center: Pose2D {
-                    position: Point2D {
-                        x: c.x as f64,
-                        y: c.y as f64,
-                    },
-                    theta: 0.0,
-                },
-                size_x: t0.w as f64,
-                size_y: t0.h as f64,
-            },
+            bbox: bbox_2d(t0),
             ..Detection2D::default()
         };
         let end = Instant::now() + Duration::from_secs(10);

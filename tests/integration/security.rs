@@ -17,8 +17,8 @@ use bevt_core::{BBox, TrackerConfig};
 use bevt_msgs::bevt::{ReinitRequest, ReinitResponse, TrackStatus};
 use bevt_msgs::builtin_interfaces::Time;
 use bevt_msgs::std_srvs::{TriggerRequest, TriggerResponse};
-use bevt_msgs::vision_msgs::{BoundingBox2D, Detection2D, Point2D, Pose2D};
-use bevt_node::convert::{bbox_from_detection, reinit_request};
+use bevt_msgs::vision_msgs::Detection2D;
+use bevt_node::convert::{bbox_2d, bbox_from_detection, reinit_request};
 use bevt_node::node::app::{NodeCore, NodeSettings};
 use bevt_node::node::ros::{context, names, output_qos, ros_name, run, service_qos, RosSettings};
 use bevt_node::node::security::DdsSecurity;
@@ -210,23 +210,12 @@ impl Commander {
 
 /// A `vision_msgs/Detection2D` for the `init` topic: box `b` on the frame stamped `stamp`.
 fn detection(b: BBox, stamp: i64) -> Detection2D {
-    let c = b.center();
     Detection2D {
         header: bevt_msgs::std_msgs::Header {
             stamp: Time::from_nanos(stamp),
             frame_id: String::new(),
         },
-        bbox: BoundingBox2D {
-            center: Pose2D {
-                position: Point2D {
-                    x: c.x as f64,
-                    y: c.y as f64,
-                },
-                theta: 0.0,
-            },
-            size_x: b.w as f64,
-            size_y: b.h as f64,
-        },
+        bbox: bbox_2d(b),
         ..Detection2D::default()
     }
 }
