@@ -225,6 +225,8 @@ pub struct Sampler {
     acc32: Vec<u32>,
     /// Per region column, the byte offset of its pixel in the row sums.
     col_src: Vec<usize>,
+    /// Integer box sums of one output row, plane-major.
+    col_sum: Vec<u32>,
 }
 
 impl Sampler {
@@ -297,8 +299,29 @@ impl Sampler {
         let batched = factor > U16_ROWS;
         self.acc16.resize(bytes, 0);
         self.acc32.resize(if batched { bytes } else { 0 }, 0);
+        self.col_sum.resize(w * planes, 0);
+        // An output row whose `factor` source rows all clamp to the same frame row (above or
+        // below the frame) equals the previous such row: copied instead of summed again.
+        let mut prev_clamped: Option<usize> = None;
+        let small_sums = (factor as u64 * factor as u64 * 255) < (1u64 << 31);
         for r in 0..h {
-            self.acc16.iter_mut().for_each(|v| *v = 0);
+            let first = sy0 + (r * factor) as isize;
+            let last = first + factor as isize - 1;
+            let clamped = if last <= 0 {
+                Some(0)
+            } else if first >= fh - 1 {
+                Some((fh - 1) as usize)
+            } else {
+                None
+            };
+            if clamped.is_some() && clamped == prev_clamped {
+                for p in 0..planes {
+                    let start = (p * h + r - 1) * w;
+                    self.inter.copy_within(start..start + w, start + w);
+                }
+                continue;
+            }
+            prev_clamped = clamped;
             self.acc32.iter_mut().for_each(|v| *v = 0);
             for k in 0..factor {
                 if batched && k > 0 && k % U16_ROWS == 0 {
@@ -307,19 +330,50 @@ impl Sampler {
                 let sy = (sy0 + (r * factor + k) as isize).clamp(0, fh - 1) as usize;
                 let start = sy * stride + first_x * bpp;
                 let src = &data[start..start + bytes];
-                for (a, &b) in self.acc16.iter_mut().zip(src) {
-                    *a += u16::from(b);
+                if k == 0 {
+                    // The first row initialises the sums (no separate clearing pass).
+                    for (a, &b) in self.acc16.iter_mut().zip(src) {
+                        *a = u16::from(b);
+                    }
+                } else {
+                    for (a, &b) in self.acc16.iter_mut().zip(src) {
+                        *a += u16::from(b);
+                    }
                 }
             }
             if batched {
                 flush(&mut self.acc16, &mut self.acc32);
+                column_sums(
+                    &self.acc32,
+                    &self.col_src,
+                    bpp,
+                    offs,
+                    factor,
+                    &mut self.col_sum,
+                );
+            } else {
+                column_sums(
+                    &self.acc16,
+                    &self.col_src,
+                    bpp,
+                    offs,
+                    factor,
+                    &mut self.col_sum,
+                );
             }
             for p in 0..planes {
                 let out = &mut self.inter[(p * h + r) * w..(p * h + r + 1) * w];
-                if batched {
-                    columns(&self.acc32, &self.col_src, offs[p], factor, inv, out);
+                let sums = &self.col_sum[p * w..(p + 1) * w];
+                if small_sums {
+                    // Sums below 2^31 convert through i32 alike, and that conversion
+                    // vectorises (u32 → f32 has no baseline x86-64 instruction).
+                    for (o, &s) in out.iter_mut().zip(sums) {
+                        *o = s as i32 as f32 * inv;
+                    }
                 } else {
-                    columns(&self.acc16, &self.col_src, offs[p], factor, inv, out);
+                    for (o, &s) in out.iter_mut().zip(sums) {
+                        *o = s as f32 * inv;
+                    }
                 }
             }
         }
@@ -400,24 +454,69 @@ fn flush(acc16: &mut [u16], acc32: &mut [u32]) {
     }
 }
 
-/// One plane of one box-averaged row: output column `j` sums the row sums of region
-/// columns `j·factor..(j+1)·factor` (byte offsets `col_src`, plus the plane's offset `off`).
-fn columns<T: Copy + Into<u32>>(
+/// The box sums of one output row for every plane, plane-major into `sums` (`planes × w`):
+/// output column `j` of plane `p` sums the row sums of region columns
+/// `j·factor..(j+1)·factor` (byte offsets `col_src`, plus the plane's offset `offs[p]`).
+/// Exact integer sums, so the order of the additions does not matter.
+fn column_sums<T: Copy + Into<u32>>(
     acc: &[T],
     col_src: &[usize],
-    off: usize,
+    bpp: usize,
+    offs: [usize; 3],
     factor: usize,
-    inv: f32,
-    out: &mut [f32],
+    sums: &mut [u32],
 ) {
-    if factor == 1 {
-        for (o, &c) in out.iter_mut().zip(col_src) {
-            *o = acc[c + off].into() as f32;
+    let planes = if bpp == 1 { 1 } else { 3 };
+    let w = sums.len() / planes;
+    match bpp {
+        3 => column_sums_px::<T, 3>(acc, col_src, offs, factor, w, sums),
+        4 => column_sums_px::<T, 4>(acc, col_src, offs, factor, w, sums),
+        _ => {
+            for (p, &off) in offs.iter().enumerate().take(planes) {
+                for (o, cols) in sums[p * w..(p + 1) * w]
+                    .iter_mut()
+                    .zip(col_src.chunks_exact(factor))
+                {
+                    *o = cols.iter().map(|&c| acc[c + off].into()).sum();
+                }
+            }
         }
-    } else {
-        for (o, cols) in out.iter_mut().zip(col_src.chunks_exact(factor)) {
-            let sum: u32 = cols.iter().map(|&c| acc[c + off].into()).sum();
-            *o = sum as f32 * inv;
+    }
+}
+
+/// [`column_sums`] for `B` interleaved bytes per pixel: each output column's pixels are read
+/// once for all planes, contiguously when they lie inside the frame.
+fn column_sums_px<T: Copy + Into<u32>, const B: usize>(
+    acc: &[T],
+    col_src: &[usize],
+    offs: [usize; 3],
+    factor: usize,
+    w: usize,
+    sums: &mut [u32],
+) {
+    let (s0, rest) = sums.split_at_mut(w);
+    let (s1, s2) = rest.split_at_mut(w);
+    let (s0, s1, s2) = (&mut s0[..w], &mut s1[..w], &mut s2[..w]);
+    for (j, cols) in col_src.chunks_exact(factor).enumerate().take(w) {
+        let mut s = [0u32; B];
+        let (a, b) = (cols[0], cols[factor - 1]);
+        if b == a + (factor - 1) * B {
+            // Consecutive pixels of the frame row (offsets grow by B inside the span).
+            for px in acc[a..b + B].chunks_exact(B) {
+                for (si, &v) in s.iter_mut().zip(px) {
+                    *si += v.into();
+                }
+            }
+        } else {
+            for &c in cols {
+                for (si, &v) in s.iter_mut().zip(&acc[c..c + B]) {
+                    *si += v.into();
+                }
+            }
+        }
+        let [o0, o1, o2] = offs;
+        if let (Some(a), Some(b), Some(c)) = (s.get(o0), s.get(o1), s.get(o2)) {
+            (s0[j], s1[j], s2[j]) = (*a, *b, *c);
         }
     }
 }
@@ -608,6 +707,64 @@ mod tests {
                     }
                     let got = s.inter[(p * s.inter_h + r) * s.inter_w + col];
                     assert!((got - sum / 9.0).abs() < 1e-3, "{p} {r} {col}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn prepared_region_is_exact_for_every_format_factor_and_overhang() {
+        // Regions over each edge and beyond the frame (whole output rows and columns
+        // outside it), every pixel format, factors 1 to 4: each box average is the exact
+        // integer sum of the clamped pixels times 1/factor².
+        let (w, h) = (23, 13);
+        for format in [
+            PixelFormat::Rgb8,
+            PixelFormat::Bgr8,
+            PixelFormat::Rgba8,
+            PixelFormat::Bgra8,
+            PixelFormat::Mono8,
+        ] {
+            let bpp = format.bytes_per_pixel();
+            let d: Vec<u8> = (0..w * h * bpp)
+                .map(|i| ((i * 131 + i / 7) % 251) as u8)
+                .collect();
+            let f = Frame::packed(&d, w, h, format).unwrap();
+            let offs = format.rgb_offsets();
+            for (cx, cy, region, out_side) in [
+                (2.0, 1.0, 40.0, 40),
+                (11.0, 6.0, 60.0, 20),
+                (21.5, 12.0, 45.0, 15),
+                (0.0, 12.9, 80.0, 20),
+                (12.0, 0.0, 9.0, 9),
+            ] {
+                let mut s = Sampler::default();
+                s.prepare(&f, Point2 { x: cx, y: cy }, region, region, out_side);
+                let fac = s.factor;
+                let inv = 1.0 / (fac * fac) as f32;
+                let px = |x: isize, y: isize, p: usize| {
+                    let (x, y) = (x.clamp(0, w as isize - 1), y.clamp(0, h as isize - 1));
+                    u32::from(d[(y as usize * w + x as usize) * bpp + offs[p]])
+                };
+                for p in 0..format.planes() {
+                    for r in 0..s.inter_h {
+                        for col in 0..s.inter_w {
+                            let mut sum = 0u32;
+                            for dy in 0..fac {
+                                for dx in 0..fac {
+                                    let x = s.ox as isize + (col * fac + dx) as isize;
+                                    let y = s.oy as isize + (r * fac + dy) as isize;
+                                    sum += px(x, y, p);
+                                }
+                            }
+                            let got = s.inter[(p * s.inter_h + r) * s.inter_w + col];
+                            assert_eq!(
+                                got.to_bits(),
+                                (sum as f32 * inv).to_bits(),
+                                "{format:?} factor {fac} plane {p} row {r} col {col}"
+                            );
+                        }
+                    }
                 }
             }
         }
