@@ -10,6 +10,7 @@
 //! Colour names need colour: a one-plane (mono8) patch has no colour-name channels; the
 //! extractor then leaves the group out (see [`super::hog::Hog`]).
 
+use super::hog::floor_small;
 use crate::image::Patch;
 use std::sync::OnceLock;
 
@@ -55,8 +56,22 @@ pub fn bin_index(r: f32, g: f32, b: f32) -> usize {
 /// convert alike).
 #[inline(always)]
 fn bin_code(r: f32, g: f32, b: f32) -> u32 {
-    let q = |v: f32| (v / BIN_WIDTH).clamp(0.0, MAX_LEVEL) as i32;
-    (q(r) + 32 * q(g) + 1024 * q(b)) as u32
+    // `(v / 8).clamp(0, 31) as i32` (NaN → 0) as selects (`NaN > 0` is false), which map to
+    // vector max/min; the division by a power of two is the exact product, and the floor of
+    // a value in [0, 31] avoids the saturating conversion (see `floor_small`).
+    let q = |v: f32| {
+        let v = v * (1.0 / BIN_WIDTH);
+        let v = if v > 0.0 { v } else { 0.0 };
+        floor_small(if v < MAX_LEVEL { v } else { MAX_LEVEL })
+    };
+    q(r) + 32 * q(g) + 1024 * q(b)
+}
+
+/// The table indices of one row (a loop that vectorises).
+fn row_codes(pr: &[f32], pg: &[f32], pb: &[f32], codes: &mut [u32]) {
+    for (((c, &r), &g), &b) in codes.iter_mut().zip(pr).zip(pg).zip(pb) {
+        *c = bin_code(r, g, b);
+    }
 }
 
 /// Writes the cell-mean colour names of a three-plane `patch` into `out`
@@ -96,13 +111,8 @@ pub fn cell_colornames_with(
                 &patch.data[2 * n + i..2 * n + i + width],
             );
             // The row's table indices first, in one vectorisable pass.
-            codes.clear();
-            codes.extend(
-                pr.iter()
-                    .zip(pg)
-                    .zip(pb)
-                    .map(|((&vr, &vg), &vb)| bin_code(vr, vg, vb)),
-            );
+            codes.resize(width, 0);
+            row_codes(pr, pg, pb, codes);
             for cx in 0..cols {
                 let span = cx * cell..((cx + 1) * cell).min(width);
                 let mut sum = [0.0f32; CN_CHANNELS];
@@ -124,6 +134,52 @@ pub fn cell_colornames_with(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bin_codes_equal_the_clamped_conversion() {
+        // The index as it was computed with a clamp and a float-to-int conversion.
+        let reference = |r: f32, g: f32, b: f32| {
+            let q = |v: f32| (v / BIN_WIDTH).clamp(0.0, MAX_LEVEL) as i32;
+            (q(r) + 32 * q(g) + 1024 * q(b)) as u32
+        };
+        let mut vals: Vec<f32> = (0..=256).map(|i| i as f32).collect();
+        vals.extend((0..=256).map(|i| i as f32 - 1e-3));
+        vals.extend([
+            -1.0,
+            -0.0,
+            300.0,
+            1e9,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+        ]);
+        let mut seed = 5u32;
+        for _ in 0..20_000 {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            vals.push((seed >> 8) as f32 / (1u32 << 24) as f32 * 255.0);
+        }
+        let n = vals.len();
+        let (r, g, b): (Vec<f32>, Vec<f32>, Vec<f32>) = (0..n)
+            .map(|i| (vals[i], vals[(i * 7 + 3) % n], vals[(i * 13 + 5) % n]))
+            .fold((vec![], vec![], vec![]), |mut acc, (x, y, z)| {
+                acc.0.push(x);
+                acc.1.push(y);
+                acc.2.push(z);
+                acc
+            });
+        let mut codes = vec![0u32; n];
+        row_codes(&r, &g, &b, &mut codes);
+        for i in 0..n {
+            assert_eq!(
+                codes[i],
+                reference(r[i], g[i], b[i]),
+                "{} {} {}",
+                r[i],
+                g[i],
+                b[i]
+            );
+        }
+    }
 
     /// Test values from the table's README (`shared/models/colornames/README.md`).
     const ROWS: [(usize, [f32; CN_CHANNELS]); 5] = [
