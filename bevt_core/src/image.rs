@@ -351,6 +351,15 @@ impl Sampler {
                     factor,
                     &mut self.col_sum,
                 );
+            } else if factor == 1 {
+                // Single pixels: a plain per-plane gather (inv = 1).
+                for p in 0..planes {
+                    let out = &mut self.inter[(p * h + r) * w..(p * h + r + 1) * w];
+                    for (o, &c) in out.iter_mut().zip(&self.col_src) {
+                        *o = f32::from(self.acc16[c + offs[p]]);
+                    }
+                }
+                continue;
             } else {
                 column_sums(
                     &self.acc16,
