@@ -320,6 +320,57 @@ pub struct ProposalScratch {
     sum: Vec<f64>,
     sq: Vec<f64>,
     map: Vec<f32>,
+    /// Sampled frame columns of every downsampled column, flattened, and where each starts.
+    cols: Vec<usize>,
+    col_start: Vec<usize>,
+    /// Grey levels of one frame row.
+    grey_row: Vec<f32>,
+    /// Per-cell sums and sample counts of one downsampled row.
+    acc: Vec<f32>,
+    /// Per-position template dot products of one map row, and one template row's share.
+    dots: Vec<f32>,
+    row_dots: Vec<f32>,
+}
+
+/// Grey levels (mean of the colour bytes, as [`grey`]) of frame row `y` into `out`.
+fn grey_row(frame: &Frame<'_>, y: usize, out: &mut Vec<f32>) {
+    let fw = frame.width();
+    let bpp = frame.format().bytes_per_pixel();
+    out.clear();
+    out.resize(fw, 0.0);
+    let start = y * frame.stride();
+    let Some(row) = frame.data().get(start..start + fw * bpp) else {
+        return;
+    };
+    match bpp {
+        1 => {
+            for (o, &v) in out.iter_mut().zip(row) {
+                *o = f32::from(v);
+            }
+        }
+        3 => grey_px::<3>(row, out),
+        4 => grey_px::<4>(row, out),
+        _ => {
+            for (o, px) in out.iter_mut().zip(row.chunks_exact(bpp)) {
+                *o = (f32::from(px[0]) + f32::from(px[1]) + f32::from(px[2])) / 3.0;
+            }
+        }
+    }
+}
+
+/// [`grey_row`] for `B` bytes per pixel. The three bytes are summed as integers: their
+/// `f32` sum is exact either way.
+fn grey_px<const B: usize>(row: &[u8], out: &mut [f32]) {
+    for (o, px) in out.iter_mut().zip(row.chunks_exact(B)) {
+        let s = u16::from(px[0]) + u16::from(px[1]) + u16::from(px[2]);
+        *o = f32::from(s) / 3.0;
+    }
+}
+
+/// Key of `f32::total_cmp` as a signed integer (same order).
+fn total_key(x: f32) -> i32 {
+    let b = x.to_bits() as i32;
+    b ^ (((b >> 31) as u32) >> 1) as i32
 }
 
 /// Up to `count` proposals for a target square of side `side` pixels: the template's
@@ -327,6 +378,10 @@ pub struct ProposalScratch {
 /// one pixel (coarser when needed to stay within [`MAX_PROPOSAL_PIXELS`]), best first, at
 /// least one template side apart. Cost: at most `MAX_PROPOSAL_PIXELS` × 16 pixel reads and
 /// `MAX_PROPOSAL_PIXELS` × `TEMPLATE_CELLS²` multiply-adds, whatever the frame size.
+///
+/// Computed a row at a time (grey levels of a frame row once, template dot products of all
+/// positions of a map row together) so the loops vectorise; every value is summed in the
+/// order of the per-position definition, so the result is that of the direct computation.
 pub fn propose(
     frame: &Frame<'_>,
     appearance: &Appearance,
@@ -345,37 +400,63 @@ pub fn propose(
         return Vec::new();
     };
     let (w, h) = ((fw as f32 / cell) as usize, (fh as f32 / cell) as usize);
-    if w < k || h < k {
+    if w < k || h < k || fw == 0 || fh == 0 {
         return Vec::new();
     }
-    // Box-averaged downsampling.
     let ProposalScratch {
         small,
         sum,
         sq,
         map,
+        cols,
+        col_start,
+        grey_row: grow,
+        acc,
+        dots,
+        row_dots,
     } = scratch;
+    // Box-averaged downsampling: per cell, the mean of at most CELL_SAMPLES² sampled
+    // pixels (clamped to the frame), summed row by row, left to right.
+    let span = |i: usize| {
+        let a = (i as f32 * cell) as isize;
+        let b = (((i + 1) as f32 * cell) as isize).max(a + 1);
+        (a, b, ((b - a) as usize).div_ceil(CELL_SAMPLES))
+    };
+    cols.clear();
+    col_start.clear();
+    for u in 0..w {
+        col_start.push(cols.len());
+        let (xa, xb, sx) = span(u);
+        cols.extend(
+            (xa..xb)
+                .step_by(sx)
+                .map(|x| x.clamp(0, fw as isize - 1) as usize),
+        );
+    }
+    col_start.push(cols.len());
     small.clear();
     small.resize(w * h, 0.0);
+    acc.clear();
+    acc.resize(w, 0.0);
     for v in 0..h {
-        let ya = (v as f32 * cell) as isize;
-        let yb = (((v + 1) as f32 * cell) as isize).max(ya + 1);
-        for u in 0..w {
-            let xa = (u as f32 * cell) as isize;
-            let xb = (((u + 1) as f32 * cell) as isize).max(xa + 1);
-            // At most CELL_SAMPLES² pixels per cell: the cost stays bounded on huge frames.
-            let (sy, sx) = (
-                ((yb - ya) as usize).div_ceil(CELL_SAMPLES),
-                ((xb - xa) as usize).div_ceil(CELL_SAMPLES),
-            );
-            let (mut acc, mut n) = (0.0, 0usize);
-            for y in (ya..yb).step_by(sy) {
-                for x in (xa..xb).step_by(sx) {
-                    acc += grey(frame, x, y);
-                    n += 1;
+        let (ya, yb, sy) = span(v);
+        acc.iter_mut().for_each(|a| *a = 0.0);
+        let mut rows = 0usize;
+        for y in (ya..yb).step_by(sy) {
+            grey_row(frame, y.clamp(0, fh as isize - 1) as usize, grow);
+            for (a, se) in acc.iter_mut().zip(col_start.windows(2)) {
+                for &x in &cols[se[0]..se[1]] {
+                    *a += grow[x];
                 }
             }
-            small[v * w + u] = acc / n.max(1) as f32;
+            rows += 1;
+        }
+        for ((o, a), se) in small[v * w..(v + 1) * w]
+            .iter_mut()
+            .zip(acc.iter())
+            .zip(col_start.windows(2))
+        {
+            *o = a / (rows * (se[1] - se[0])).max(1) as f32;
         }
     }
     // Integral images of the values and their squares, (w+1) × (h+1).
@@ -398,7 +479,27 @@ pub fn propose(
     map.clear();
     map.resize(mw * mh, f32::NEG_INFINITY);
     let nk = (k * k) as f64;
+    // The neutral element `Iterator::sum` starts from (the sign of its zero matters for
+    // bit-equality with the per-position sums).
+    let zero: f32 = std::iter::empty::<f32>().sum();
+    dots.clear();
+    dots.resize(mw, 0.0);
+    row_dots.clear();
+    row_dots.resize(mw, 0.0);
     for v in 0..mh {
+        dots.iter_mut().for_each(|d| *d = 0.0);
+        for r in 0..k {
+            row_dots.iter_mut().for_each(|d| *d = zero);
+            let src = &small[(v + r) * w..(v + r + 1) * w];
+            for (c, &tc) in t[r * k..(r + 1) * k].iter().enumerate() {
+                for (d, &a) in row_dots.iter_mut().zip(&src[c..c + mw]) {
+                    *d += a * tc;
+                }
+            }
+            for (d, &rd) in dots.iter_mut().zip(row_dots.iter()) {
+                *d += rd;
+            }
+        }
         for u in 0..mw {
             let rect = |a: &[f64]| {
                 a[(v + k) * iw + u + k] - a[v * iw + u + k] - a[(v + k) * iw + u] + a[v * iw + u]
@@ -408,24 +509,20 @@ pub fn propose(
             if var < f64::from(MIN_MATCH_STD * MIN_MATCH_STD) * nk {
                 continue;
             }
-            let mut dot = 0.0f32;
-            for r in 0..k {
-                let row = &small[(v + r) * w + u..(v + r) * w + u + k];
-                dot += row
-                    .iter()
-                    .zip(&t[r * k..(r + 1) * k])
-                    .map(|(a, b)| a * b)
-                    .sum::<f32>();
-            }
-            map[v * mw + u] = dot / var.sqrt() as f32;
+            map[v * mw + u] = dots[u] / var.sqrt() as f32;
         }
     }
     // Best first, suppressing everything within one template side of a pick.
     let mut out = Vec::with_capacity(count);
     for _ in 0..count {
-        let Some((i, &score)) = map.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)) else {
+        // The last of the largest values under `total_cmp`, as `Iterator::max_by` picks.
+        let Some(best) = map.iter().map(|&m| total_key(m)).max() else {
             break;
         };
+        let Some(i) = map.iter().rposition(|&m| total_key(m) == best) else {
+            break;
+        };
+        let score = map[i];
         if !score.is_finite() {
             break;
         }
@@ -574,6 +671,186 @@ mod tests {
             }
         }
         img
+    }
+
+    /// The direct per-position form of [`propose`] (before it was computed row-wise).
+    #[derive(Default)]
+    struct RefScratch {
+        small: Vec<f32>,
+        sum: Vec<f64>,
+        sq: Vec<f64>,
+        map: Vec<f32>,
+    }
+
+    /// Up to `count` proposals for a target square of side `side` pixels: the template's
+    /// normalised cross-correlation over the whole frame, downsampled so a template cell is
+    /// one pixel (coarser when needed to stay within [`MAX_PROPOSAL_PIXELS`]), best first, at
+    /// least one template side apart. Cost: at most `MAX_PROPOSAL_PIXELS` × 16 pixel reads and
+    /// `MAX_PROPOSAL_PIXELS` × `TEMPLATE_CELLS²` multiply-adds, whatever the frame size.
+    fn propose_reference(
+        frame: &Frame<'_>,
+        appearance: &Appearance,
+        side: f32,
+        count: usize,
+        scratch: &mut RefScratch,
+    ) -> Vec<Proposal> {
+        let (fw, fh) = (frame.width(), frame.height());
+        if count == 0 || !side.is_finite() || side <= 0.0 {
+            return Vec::new();
+        }
+        let area_floor = ((fw * fh) as f32 / MAX_PROPOSAL_PIXELS as f32).sqrt();
+        let cell = (side / TEMPLATE_CELLS as f32).max(area_floor).max(1.0);
+        let k = ((side / cell).round() as usize).clamp(MIN_MATCH_CELLS, TEMPLATE_CELLS);
+        let Some(t) = appearance.matched(k) else {
+            return Vec::new();
+        };
+        let (w, h) = ((fw as f32 / cell) as usize, (fh as f32 / cell) as usize);
+        if w < k || h < k {
+            return Vec::new();
+        }
+        // Box-averaged downsampling.
+        let RefScratch {
+            small,
+            sum,
+            sq,
+            map,
+        } = scratch;
+        small.clear();
+        small.resize(w * h, 0.0);
+        for v in 0..h {
+            let ya = (v as f32 * cell) as isize;
+            let yb = (((v + 1) as f32 * cell) as isize).max(ya + 1);
+            for u in 0..w {
+                let xa = (u as f32 * cell) as isize;
+                let xb = (((u + 1) as f32 * cell) as isize).max(xa + 1);
+                // At most CELL_SAMPLES² pixels per cell: the cost stays bounded on huge frames.
+                let (sy, sx) = (
+                    ((yb - ya) as usize).div_ceil(CELL_SAMPLES),
+                    ((xb - xa) as usize).div_ceil(CELL_SAMPLES),
+                );
+                let (mut acc, mut n) = (0.0, 0usize);
+                for y in (ya..yb).step_by(sy) {
+                    for x in (xa..xb).step_by(sx) {
+                        acc += grey(frame, x, y);
+                        n += 1;
+                    }
+                }
+                small[v * w + u] = acc / n.max(1) as f32;
+            }
+        }
+        // Integral images of the values and their squares, (w+1) × (h+1).
+        let iw = w + 1;
+        sum.clear();
+        sum.resize(iw * (h + 1), 0.0);
+        sq.clear();
+        sq.resize(iw * (h + 1), 0.0);
+        for v in 0..h {
+            let (mut rs, mut rq) = (0.0f64, 0.0f64);
+            for u in 0..w {
+                let x = f64::from(small[v * w + u]);
+                rs += x;
+                rq += x * x;
+                sum[(v + 1) * iw + u + 1] = sum[v * iw + u + 1] + rs;
+                sq[(v + 1) * iw + u + 1] = sq[v * iw + u + 1] + rq;
+            }
+        }
+        let (mw, mh) = (w - k + 1, h - k + 1);
+        map.clear();
+        map.resize(mw * mh, f32::NEG_INFINITY);
+        let nk = (k * k) as f64;
+        for v in 0..mh {
+            for u in 0..mw {
+                let rect = |a: &[f64]| {
+                    a[(v + k) * iw + u + k] - a[v * iw + u + k] - a[(v + k) * iw + u]
+                        + a[v * iw + u]
+                };
+                let (s, q) = (rect(sum), rect(sq));
+                let var = (q - s * s / nk).max(0.0);
+                if var < f64::from(MIN_MATCH_STD * MIN_MATCH_STD) * nk {
+                    continue;
+                }
+                let mut dot = 0.0f32;
+                for r in 0..k {
+                    let row = &small[(v + r) * w + u..(v + r) * w + u + k];
+                    dot += row
+                        .iter()
+                        .zip(&t[r * k..(r + 1) * k])
+                        .map(|(a, b)| a * b)
+                        .sum::<f32>();
+                }
+                map[v * mw + u] = dot / var.sqrt() as f32;
+            }
+        }
+        // Best first, suppressing everything within one template side of a pick.
+        let mut out = Vec::with_capacity(count);
+        for _ in 0..count {
+            let Some((i, &score)) = map.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)) else {
+                break;
+            };
+            if !score.is_finite() {
+                break;
+            }
+            let (pv, pu) = (i / mw, i % mw);
+            out.push(Proposal {
+                center: Point2 {
+                    x: (pu as f32 + k as f32 / 2.0) * cell,
+                    y: (pv as f32 + k as f32 / 2.0) * cell,
+                },
+                score,
+            });
+            for v in pv.saturating_sub(k - 1)..(pv + k).min(mh) {
+                for u in pu.saturating_sub(k - 1)..(pu + k).min(mw) {
+                    map[v * mw + u] = f32::NEG_INFINITY;
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn row_wise_proposals_equal_the_per_position_definition_bit_for_bit() {
+        // Colour and grey frames, cells below and above 4 px (all or sampled pixels), frame
+        // sizes that are not multiples of the cell.
+        for (fw, fh, side, fmt) in [
+            (203usize, 151usize, 40.0f32, crate::image::PixelFormat::Rgb8),
+            (400, 300, 24.0, crate::image::PixelFormat::Mono8),
+            (333, 97, 90.0, crate::image::PixelFormat::Bgra8),
+            (640, 480, 20.0, crate::image::PixelFormat::Bgr8),
+        ] {
+            let bpp = fmt.bytes_per_pixel();
+            let mut seed = 0x1234_5678u32 ^ fw as u32;
+            let img: Vec<u8> = (0..fw * fh * bpp)
+                .map(|i| {
+                    seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    // Smooth structure plus noise, so normalised scores spread out.
+                    ((i / bpp % fw) as u32 / 9 * 13 + (i / bpp / fw) as u32 / 7 * 5 + (seed >> 28))
+                        as u8
+                })
+                .collect();
+            let f = Frame::packed(&img, fw, fh, fmt).unwrap();
+            let mut a = Appearance::default();
+            a.observe(
+                &f,
+                Point2 {
+                    x: fw as f32 / 3.0,
+                    y: fh as f32 / 2.0,
+                },
+                side,
+                1.0,
+            );
+            let got = propose(&f, &a, side, 4, &mut ProposalScratch::default());
+            let want = propose_reference(&f, &a, side, 4, &mut RefScratch::default());
+            assert!(!want.is_empty());
+            assert_eq!(got.len(), want.len());
+            for (g, w) in got.iter().zip(&want) {
+                assert_eq!(
+                    g.score.to_bits(),
+                    w.score.to_bits(),
+                    "{fw}x{fh} {g:?} {w:?}"
+                );
+                assert_eq!(g.center, w.center);
+            }
+        }
     }
 
     #[test]
