@@ -381,11 +381,12 @@ pub struct RedetectionConfig {
     /// frame (0 = none: only the tile walk).
     pub proposals: usize,
     /// A learned verifier that searches the frame while lost, besides the filter
-    /// (`none`, or `nanotrack`: cargo feature `cnn` and ONNX Runtime needed).
+    /// (`none`, or `nanotrack`: NanoTrack v2 run in pure Rust, in every build).
     pub verifier: VerifierKind,
-    /// The verifier's backbone (ONNX; NanoTrack v2, any input size).
+    /// The verifier's backbone (ONNX; NanoTrack v2, any input size); empty: the NanoTrack v2
+    /// backbone embedded in the library.
     pub verifier_backbone: String,
-    /// The verifier's correlation head (ONNX).
+    /// The verifier's correlation head (ONNX); empty: the embedded NanoTrack v2 head.
     pub verifier_head: String,
     /// Verifier network passes per lost frame (the time bound of the verifier; one pass
     /// is one backbone run on a 255×255 search crop plus one head run).
@@ -1055,13 +1056,6 @@ impl TrackerConfig {
             "redetection.verifier_threshold",
             r.verifier_threshold,
             "a logit margin in [-100, 100]",
-        )?;
-        check(
-            r.verifier == VerifierKind::None
-                || (!r.verifier_backbone.is_empty() && !r.verifier_head.is_empty()),
-            "redetection.verifier_backbone",
-            format!("{:?} / {:?}", r.verifier_backbone, r.verifier_head),
-            "both model paths when redetection.verifier is not none",
         )?;
         check(
             (1..=256).contains(&self.threads),

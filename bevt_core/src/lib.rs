@@ -47,7 +47,6 @@ pub mod filter;
 pub mod geometry;
 pub mod image;
 pub mod redetect;
-#[cfg(feature = "cnn")]
 pub mod redetect_nano;
 pub mod scale;
 pub mod scale_filter;

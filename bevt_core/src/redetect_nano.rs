@@ -1,5 +1,5 @@
-//! NanoTrack v2 as a learned re-detection verifier (cargo feature `cnn`,
-//! `redetection.verifier: nanotrack`).
+//! NanoTrack v2 as a learned re-detection verifier (`redetection.verifier: nanotrack`),
+//! run in pure Rust by `tract` (no ONNX Runtime, no cargo feature).
 //!
 //! The tracking-trained Siamese network scores a search region against a template taken on
 //! the initial frame: the backbone turns a 127×127 template crop (context side
@@ -12,37 +12,276 @@
 //! are sampled with the tracker's [`Sampler`] (RGB planes, raw 0–255; grey frames are
 //! replicated into the three planes; outside the frame the border is replicated, where
 //! `TrackerNano` fills with the mean colour).
+//!
+//! The models: empty `redetection.verifier_backbone` / `verifier_head` mean the NanoTrack v2
+//! files embedded in this crate (`models/nanotrack/`, see its README for origin, licence and
+//! sha256), so the default needs no file at run time; a path loads that file instead. Each
+//! network is optimised once per input size (backbone: 127 and 255; head: one plan) and run
+//! single-threaded.
 
 use crate::error::TrackError;
-use crate::features::cnn::{load_runtime, CnnError};
 use crate::geometry::Point2;
 use crate::image::{Frame, Patch, Sampler};
 use crate::redetect::{context_side, Verifier, VerifierHit};
-use ort::session::builder::GraphOptimizationLevel;
-use ort::session::Session;
-use ort::value::TensorRef;
 use std::path::Path;
-use std::sync::{Arc, Mutex, PoisonError};
+use thiserror::Error;
+use tract_onnx::prelude::{
+    tvec, DatumType, Framework, InferenceFact, InferenceModel, InferenceModelExt, Tensor,
+    TypedSimplePlan, TypedSimpleState,
+};
 
 /// Template crop side, pixels.
 pub const TEMPLATE_SIDE: usize = 127;
 /// Search crop side, pixels.
 pub const SEARCH_SIDE: usize = 255;
 /// Feature channels of the backbone.
-const CHANNELS: usize = 48;
+pub const CHANNELS: usize = 48;
 /// Template feature side (127 / 16).
-const TEMPLATE_CELLS: usize = 8;
+pub const TEMPLATE_CELLS: usize = 8;
 /// Search feature and score-map side (255 / 16).
-const SEARCH_CELLS: usize = 16;
+pub const SEARCH_CELLS: usize = 16;
 /// Backbone stride, crop pixels.
 const STRIDE: f32 = 16.0;
 /// Crop coordinate of grid point 8 (the crop centre as NanoTrack counts it).
 const GRID_CENTRE: f32 = 127.0;
+/// Largest model file read from disk (the shipped ones are 1.0 and 0.7 MB).
+pub const MAX_MODEL_BYTES: u64 = 64 << 20;
+
+/// The embedded NanoTrack v2 backbone (`models/nanotrack/nanotrackv2_backbone_sim_dyn.onnx`).
+static EMBEDDED_BACKBONE: &[u8] =
+    include_bytes!("../../models/nanotrack/nanotrackv2_backbone_sim_dyn.onnx");
+/// The embedded NanoTrack v2 head (`models/nanotrack/nanotrackv2_head_sim.onnx`).
+static EMBEDDED_HEAD: &[u8] = include_bytes!("../../models/nanotrack/nanotrackv2_head_sim.onnx");
+
+/// Name of an embedded model in messages.
+const EMBEDDED: &str = "<embedded NanoTrack v2>";
+
+/// What can be wrong with the verifier's models; each message names the config key.
+#[derive(Debug, Error, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum NanoError {
+    /// The model file does not exist.
+    #[error("{key}: {path}: no such file")]
+    ModelMissing {
+        /// Config key (`redetection.verifier_backbone` or `verifier_head`).
+        key: &'static str,
+        /// The path.
+        path: String,
+    },
+    /// The file could not be read or is too large.
+    #[error("{key}: cannot read {path}: {reason}")]
+    Read {
+        /// Config key.
+        key: &'static str,
+        /// The path.
+        path: String,
+        /// Why.
+        reason: String,
+    },
+    /// The file is not an ONNX model this verifier can run (parse or analysis failed, a
+    /// named input or output is missing, or an input of the expected shape is refused).
+    #[error("{key}: {path} is not a usable NanoTrack v2 ONNX model: {reason}")]
+    Model {
+        /// Config key.
+        key: &'static str,
+        /// The path (or the embedded model's name).
+        path: String,
+        /// Parser / optimiser message.
+        reason: String,
+    },
+    /// An output has another shape than NanoTrack v2's.
+    #[error("{key}: {path}: output `{name}` has shape {shape:?}; expected {expected:?}")]
+    Shape {
+        /// Config key.
+        key: &'static str,
+        /// The path.
+        path: String,
+        /// Output name.
+        name: &'static str,
+        /// Its shape.
+        shape: Vec<usize>,
+        /// NanoTrack v2's.
+        expected: Vec<usize>,
+    },
+    /// An output contains NaN or infinity.
+    #[error("{key}: {path}: output `{name}` contains a non-finite value (NaN or infinity)")]
+    NonFinite {
+        /// Config key.
+        key: &'static str,
+        /// The path.
+        path: String,
+        /// Output name.
+        name: &'static str,
+    },
+    /// Inference failed.
+    #[error("{key}: {path}: inference failed: {reason}")]
+    Run {
+        /// Config key.
+        key: &'static str,
+        /// The path.
+        path: String,
+        /// Runtime message.
+        reason: String,
+    },
+}
+
+impl From<NanoError> for TrackError {
+    fn from(e: NanoError) -> Self {
+        TrackError::Feature(format!("redetection.verifier: {e}"))
+    }
+}
+
+/// Config key of the backbone path.
+const BACKBONE_KEY: &str = "redetection.verifier_backbone";
+/// Config key of the head path.
+const HEAD_KEY: &str = "redetection.verifier_head";
+
+/// One optimised network: its plan, a reusable run state, and where it came from.
+struct Net {
+    state: TypedSimpleState,
+    key: &'static str,
+    path: String,
+}
+
+impl Net {
+    /// Optimises `model` with `inputs` (names and shapes) and `outputs` (names).
+    fn plan(
+        model: &InferenceModel,
+        key: &'static str,
+        path: &str,
+        inputs: &[(&str, &[usize])],
+        outputs: &[&str],
+    ) -> Result<Self, NanoError> {
+        let err = |e: tract_onnx::prelude::TractError| NanoError::Model {
+            key,
+            path: path.to_string(),
+            reason: format!("{e:#}"),
+        };
+        let mut m = model
+            .clone()
+            .with_input_names(inputs.iter().map(|(n, _)| *n))
+            .map_err(err)?
+            .with_outputs_by_name(outputs.iter().copied())
+            .map_err(err)?;
+        for (i, (_, shape)) in inputs.iter().enumerate() {
+            let fact = InferenceFact::dt_shape(DatumType::F32, shape.to_vec());
+            m.set_input_fact(i, fact).map_err(err)?;
+        }
+        for o in 0..outputs.len() {
+            m.set_output_fact(o, InferenceFact::default())
+                .map_err(err)?;
+        }
+        let plan = TypedSimplePlan::new(m.into_optimized().map_err(err)?).map_err(err)?;
+        let state = TypedSimpleState::new(&plan).map_err(err)?;
+        Ok(Self {
+            state,
+            key,
+            path: path.to_string(),
+        })
+    }
+
+    /// Runs on `inputs` (`(shape, data)`), returning each output's data checked against
+    /// `expected` (`(name, shape)`) and for finite values.
+    fn run(
+        &mut self,
+        inputs: &[(&[usize], &[f32])],
+        expected: &[(&'static str, &[usize])],
+    ) -> Result<Vec<Vec<f32>>, NanoError> {
+        let run_err = |reason: String| NanoError::Run {
+            key: self.key,
+            path: self.path.clone(),
+            reason,
+        };
+        let mut tv = tvec![];
+        for (shape, data) in inputs {
+            let t = Tensor::from_shape(shape, data).map_err(|e| run_err(format!("{e:#}")))?;
+            tv.push(t.into());
+        }
+        let outputs = self.state.run(tv).map_err(|e| run_err(format!("{e:#}")))?;
+        if outputs.len() != expected.len() {
+            return Err(run_err(format!(
+                "{} outputs; expected {}",
+                outputs.len(),
+                expected.len()
+            )));
+        }
+        let mut out = Vec::with_capacity(expected.len());
+        for (value, &(name, shape)) in outputs.iter().zip(expected) {
+            if value.shape() != shape {
+                return Err(NanoError::Shape {
+                    key: self.key,
+                    path: self.path.clone(),
+                    name,
+                    shape: value.shape().to_vec(),
+                    expected: shape.to_vec(),
+                });
+            }
+            let view = value
+                .try_as_plain_ram()
+                .map_err(|e| run_err(format!("{name}: {e:#}")))?;
+            let data = view
+                .as_slice::<f32>()
+                .map_err(|e| run_err(format!("{name}: {e:#}")))?;
+            if data.iter().any(|v| !v.is_finite()) {
+                return Err(NanoError::NonFinite {
+                    key: self.key,
+                    path: self.path.clone(),
+                    name,
+                });
+            }
+            out.push(data.to_vec());
+        }
+        Ok(out)
+    }
+}
+
+/// The ONNX model at `path` (empty: `embedded`), parsed, and the name it goes by.
+fn load(
+    key: &'static str,
+    path: &str,
+    embedded: &'static [u8],
+) -> Result<(InferenceModel, String), NanoError> {
+    let (bytes, name) = if path.is_empty() {
+        (std::borrow::Cow::Borrowed(embedded), EMBEDDED.to_string())
+    } else {
+        let p = Path::new(path);
+        if !p.is_file() {
+            return Err(NanoError::ModelMissing {
+                key,
+                path: path.to_string(),
+            });
+        }
+        let read_err = |reason: String| NanoError::Read {
+            key,
+            path: path.to_string(),
+            reason,
+        };
+        let len = std::fs::metadata(p)
+            .map_err(|e| read_err(e.to_string()))?
+            .len();
+        if len > MAX_MODEL_BYTES {
+            return Err(read_err(format!(
+                "{len} bytes; at most {MAX_MODEL_BYTES} accepted"
+            )));
+        }
+        let bytes = std::fs::read(p).map_err(|e| read_err(e.to_string()))?;
+        (std::borrow::Cow::Owned(bytes), path.to_string())
+    };
+    let model = tract_onnx::onnx()
+        .model_for_read(&mut &bytes[..])
+        .map_err(|e| NanoError::Model {
+            key,
+            path: name.clone(),
+            reason: format!("{e:#}"),
+        })?;
+    Ok((model, name))
+}
 
 /// NanoTrack v2 backbone + head (see the module doc).
 pub struct NanoVerifier {
-    backbone: Arc<Mutex<Session>>,
-    head: Arc<Mutex<Session>>,
+    backbone_template: Net,
+    backbone_search: Net,
+    head: Net,
     template: Vec<f32>,
     input: Vec<f32>,
     search: Vec<f32>,
@@ -53,73 +292,49 @@ pub struct NanoVerifier {
 impl std::fmt::Debug for NanoVerifier {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("NanoVerifier")
+            .field("backbone", &self.backbone_search.path)
+            .field("head", &self.head.path)
             .field("template", &!self.template.is_empty())
             .finish()
     }
 }
 
-fn session(env: &ort::environment::Environment, path: &str) -> Result<Session, CnnError> {
-    let model = Path::new(path);
-    if !model.is_file() {
-        return Err(CnnError::ModelMissing {
-            path: path.to_string(),
-        });
-    }
-    let err = |reason: String| CnnError::Model {
-        path: path.to_string(),
-        reason,
-    };
-    Session::builder(env)
-        .map_err(|e| err(e.to_string()))?
-        .with_optimization_level(GraphOptimizationLevel::All)
-        .map_err(|e| err(e.to_string()))?
-        .with_intra_threads(1)
-        .map_err(|e| err(e.to_string()))?
-        .with_inter_threads(1)
-        .map_err(|e| err(e.to_string()))?
-        .commit_from_file(model)
-        .map_err(|e| err(e.to_string()))
-}
-
-/// The named output of `outputs` as `(dims, data)`, checked to be `expected` and finite.
-fn output<'a>(
-    outputs: &'a ort::session::SessionOutputs<'_>,
-    name: &str,
-    expected: &[i64],
-) -> Result<&'a [f32], CnnError> {
-    let value = outputs.get(name).ok_or_else(|| CnnError::NoOutput {
-        name: name.to_string(),
-        available: String::new(),
-    })?;
-    let (shape, data) = value
-        .try_extract_tensor::<f32>()
-        .map_err(|e| CnnError::Run(format!("{name}: {e}")))?;
-    let dims: Vec<i64> = shape.iter().copied().collect();
-    if dims != expected {
-        return Err(CnnError::Rank {
-            name: name.to_string(),
-            shape: dims,
-        });
-    }
-    if data.iter().any(|v| !v.is_finite()) {
-        return Err(CnnError::NonFinite {
-            name: name.to_string(),
-        });
-    }
-    Ok(data)
-}
-
 impl NanoVerifier {
-    /// Loads the runtime (`runtime`, or `ORT_DYLIB_PATH` when empty) and both models, and
-    /// checks them on a grey template and search crop.
+    /// Loads both models (an empty path: the embedded NanoTrack v2 file), optimises the
+    /// backbone for 127×127 and 255×255 inputs and the head, and checks them on a grey
+    /// template and search crop.
     ///
     /// # Errors
-    /// A [`CnnError`] naming the runtime or model problem.
-    pub fn new(runtime: &str, backbone: &str, head: &str) -> Result<Self, CnnError> {
-        let env = load_runtime(runtime)?;
+    /// A [`NanoError`] naming the key and the model problem.
+    pub fn new(backbone: &str, head: &str) -> Result<Self, NanoError> {
+        let (bb, bb_name) = load(BACKBONE_KEY, backbone, EMBEDDED_BACKBONE)?;
+        let (hd, hd_name) = load(HEAD_KEY, head, EMBEDDED_HEAD)?;
+        let backbone_plan = |side: usize| {
+            Net::plan(
+                &bb,
+                BACKBONE_KEY,
+                &bb_name,
+                &[("input", &[1, 3, side, side])],
+                &["output"],
+            )
+        };
+        let backbone_template = backbone_plan(TEMPLATE_SIDE)?;
+        let backbone_search = backbone_plan(SEARCH_SIDE)?;
+        let (t, x) = (TEMPLATE_CELLS, SEARCH_CELLS);
+        let head = Net::plan(
+            &hd,
+            HEAD_KEY,
+            &hd_name,
+            &[
+                ("input1", &[1, CHANNELS, t, t]),
+                ("input2", &[1, CHANNELS, x, x]),
+            ],
+            &["output1", "output2"],
+        )?;
         let mut v = Self {
-            backbone: Arc::new(Mutex::new(session(&env, backbone)?)),
-            head: Arc::new(Mutex::new(session(&env, head)?)),
+            backbone_template,
+            backbone_search,
+            head,
             template: Vec::new(),
             input: Vec::new(),
             search: Vec::new(),
@@ -127,12 +342,68 @@ impl NanoVerifier {
             patch: Patch::default(),
         };
         v.input = vec![128.0; 3 * TEMPLATE_SIDE * TEMPLATE_SIDE];
-        v.template = v.run_backbone(TEMPLATE_SIDE, TEMPLATE_CELLS)?;
+        v.template = v.run_backbone(TEMPLATE_SIDE)?;
         v.input = vec![128.0; 3 * SEARCH_SIDE * SEARCH_SIDE];
-        v.search = v.run_backbone(SEARCH_SIDE, SEARCH_CELLS)?;
+        v.search = v.run_backbone(SEARCH_SIDE)?;
         v.run_head()?;
         v.template.clear();
         Ok(v)
+    }
+
+    /// The backbone on `input`, a `[1,3,side,side]` RGB tensor (raw 0–255), `side` 127 or
+    /// 255: the `[1,48,side/16,side/16]` features (for tests and benchmarks).
+    ///
+    /// # Errors
+    /// [`NanoError::Run`] for another side or input length, or an output error.
+    pub fn backbone(&mut self, input: &[f32], side: usize) -> Result<Vec<f32>, NanoError> {
+        if (side != TEMPLATE_SIDE && side != SEARCH_SIDE) || input.len() != 3 * side * side {
+            return Err(NanoError::Run {
+                key: BACKBONE_KEY,
+                path: self.backbone_search.path.clone(),
+                reason: format!(
+                    "input of {} values for side {side}; sides 127 and 255 are planned",
+                    input.len()
+                ),
+            });
+        }
+        self.input.clear();
+        self.input.extend_from_slice(input);
+        self.run_backbone(side)
+    }
+
+    /// The head on a template feature `[1,48,8,8]` and a search feature `[1,48,16,16]`:
+    /// per grid point the foreground logit margin and the four box distances,
+    /// `(margins[256], loc[4·256])` (for tests and benchmarks).
+    ///
+    /// # Errors
+    /// [`NanoError::Run`] for wrong lengths, or an output error.
+    pub fn head(
+        &mut self,
+        template: &[f32],
+        search: &[f32],
+    ) -> Result<(Vec<f32>, Vec<f32>), NanoError> {
+        let (t, x) = (TEMPLATE_CELLS, SEARCH_CELLS);
+        if template.len() != CHANNELS * t * t || search.len() != CHANNELS * x * x {
+            return Err(NanoError::Run {
+                key: HEAD_KEY,
+                path: self.head.path.clone(),
+                reason: format!(
+                    "features of {} and {} values; expected {} and {}",
+                    template.len(),
+                    search.len(),
+                    CHANNELS * t * t,
+                    CHANNELS * x * x
+                ),
+            });
+        }
+        let (kept_t, kept_s) = (
+            std::mem::replace(&mut self.template, template.to_vec()),
+            std::mem::replace(&mut self.search, search.to_vec()),
+        );
+        let r = self.run_head();
+        self.template = kept_t;
+        self.search = kept_s;
+        r
     }
 
     /// Samples the square of side `region` at `center` into `self.input` (`out`², RGB).
@@ -151,36 +422,37 @@ impl NanoVerifier {
         }
     }
 
-    /// Backbone on `self.input` (`[1,3,side,side]`): the `[1,48,cells,cells]` features.
-    fn run_backbone(&mut self, side: usize, cells: usize) -> Result<Vec<f32>, CnnError> {
-        let tensor = TensorRef::from_array_view(([1usize, 3, side, side], &self.input[..]))
-            .map_err(|e| CnnError::Run(e.to_string()))?;
-        let mut s = self.backbone.lock().unwrap_or_else(PoisonError::into_inner);
-        let outputs = s
-            .run(ort::inputs!["input" => tensor])
-            .map_err(|e| CnnError::Run(e.to_string()))?;
-        let c = cells as i64;
-        Ok(output(&outputs, "output", &[1, CHANNELS as i64, c, c])?.to_vec())
+    /// Backbone on `self.input` (`[1,3,side,side]`, side 127 or 255): the
+    /// `[1,48,side/16,side/16]` features.
+    fn run_backbone(&mut self, side: usize) -> Result<Vec<f32>, NanoError> {
+        let (net, cells) = if side == TEMPLATE_SIDE {
+            (&mut self.backbone_template, TEMPLATE_CELLS)
+        } else {
+            (&mut self.backbone_search, SEARCH_CELLS)
+        };
+        let mut out = net.run(
+            &[(&[1, 3, side, side], &self.input)],
+            &[("output", &[1, CHANNELS, cells, cells])],
+        )?;
+        Ok(out.swap_remove(0))
     }
 
     /// Head on the template and `self.search`: per grid point the foreground logit margin
     /// and the four box distances, `(margins[256], loc[4·256])`.
-    fn run_head(&mut self) -> Result<(Vec<f32>, Vec<f32>), CnnError> {
+    fn run_head(&mut self) -> Result<(Vec<f32>, Vec<f32>), NanoError> {
         let (t, x) = (TEMPLATE_CELLS, SEARCH_CELLS);
-        let z = TensorRef::from_array_view(([1usize, CHANNELS, t, t], &self.template[..]))
-            .map_err(|e| CnnError::Run(e.to_string()))?;
-        let s = TensorRef::from_array_view(([1usize, CHANNELS, x, x], &self.search[..]))
-            .map_err(|e| CnnError::Run(e.to_string()))?;
-        let mut h = self.head.lock().unwrap_or_else(PoisonError::into_inner);
-        let outputs = h
-            .run(ort::inputs!["input1" => z, "input2" => s])
-            .map_err(|e| CnnError::Run(e.to_string()))?;
-        let xs = x as i64;
-        let cls = output(&outputs, "output1", &[1, 2, xs, xs])?;
-        let loc = output(&outputs, "output2", &[1, 4, xs, xs])?;
+        let mut out = self.head.run(
+            &[
+                (&[1, CHANNELS, t, t], &self.template),
+                (&[1, CHANNELS, x, x], &self.search),
+            ],
+            &[("output1", &[1, 2, x, x]), ("output2", &[1, 4, x, x])],
+        )?;
+        let loc = out.swap_remove(1);
+        let cls = out.swap_remove(0);
         let n = x * x;
         let margins = (0..n).map(|i| cls[n + i] - cls[i]).collect();
-        Ok((margins, loc.to_vec()))
+        Ok((margins, loc))
     }
 }
 
@@ -198,7 +470,7 @@ impl Verifier for NanoVerifier {
             return Ok(());
         }
         self.crop(frame, center, side, TEMPLATE_SIDE);
-        self.template = self.run_backbone(TEMPLATE_SIDE, TEMPLATE_CELLS)?;
+        self.template = self.run_backbone(TEMPLATE_SIDE)?;
         Ok(())
     }
 
@@ -212,7 +484,7 @@ impl Verifier for NanoVerifier {
             return Ok(None);
         }
         self.crop(frame, center, side, SEARCH_SIDE);
-        self.search = self.run_backbone(SEARCH_SIDE, SEARCH_CELLS)?;
+        self.search = self.run_backbone(SEARCH_SIDE)?;
         let (margins, loc) = self.run_head()?;
         let Some((i, &score)) = margins.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)) else {
             return Ok(None);

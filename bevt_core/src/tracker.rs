@@ -453,28 +453,13 @@ impl BevtTracker {
         let r = &spec.config.redetection;
         match r.verifier {
             VerifierKind::None => Ok(None),
-            #[cfg(feature = "cnn")]
             VerifierKind::Nanotrack => {
-                let runtime = spec
-                    .config
-                    .features
-                    .cnn
-                    .as_ref()
-                    .map_or("", |c| c.runtime.as_str());
                 let v = crate::redetect_nano::NanoVerifier::new(
-                    runtime,
                     &r.verifier_backbone,
                     &r.verifier_head,
-                )
-                .map_err(|e| TrackError::Feature(format!("redetection.verifier: {e}")))?;
+                )?;
                 Ok(Some(Box::new(v)))
             }
-            #[cfg(not(feature = "cnn"))]
-            VerifierKind::Nanotrack => Err(TrackError::Feature(
-                "redetection.verifier is nanotrack but bevt_core was built without the `cnn` \
-                 cargo feature (build with --features cnn, or set redetection.verifier: none)"
-                    .into(),
-            )),
         }
     }
 

@@ -1,9 +1,19 @@
 //! Losing and re-acquiring the target (issue 8) on synthetic sequences generated here: the
-//! target is hidden for some frames and reappears elsewhere in the frame.
+//! target is hidden for some frames and reappears elsewhere in the frame. The filter's own
+//! re-detection (`redetection.verifier: none`); with the NanoTrack verifier on the same
+//! scenes: `verifier.rs`.
 
+use bevt_core::config::VerifierKind;
 use bevt_core::{TrackState, TrackerConfig};
 use bevt_tests::scenes::{far_reentry, occluded, with_look_alike, HIDE, SHOW};
 use bevt_tests::track_synthetic;
+
+/// The default configuration with the filter alone deciding (no learned verifier).
+fn filter_only() -> TrackerConfig {
+    let mut cfg = TrackerConfig::default();
+    cfg.redetection.verifier = VerifierKind::None;
+    cfg
+}
 
 /// Index into the per-frame results of sequence frame `t` (results start at frame 1).
 fn at(t: usize) -> usize {
@@ -13,7 +23,7 @@ fn at(t: usize) -> usize {
 #[test]
 fn hidden_target_is_lost_then_reacquired_where_it_reappears() {
     let seq = occluded();
-    let cfg = TrackerConfig::default();
+    let cfg = filter_only();
     let lost_frames = cfg.track_state.lost_frames;
     let r = track_synthetic(&seq, cfg, seq.truth(0));
     let states: Vec<TrackState> = r.iter().map(|(o, _)| o.state).collect();
@@ -77,8 +87,8 @@ fn assert_look_alike_not_taken(cfg: TrackerConfig, what: &str) {
 /// included: colour names in them keep the HOG-only track confident while hidden).
 #[test]
 fn look_alike_shown_while_hidden_is_not_taken() {
-    assert_look_alike_not_taken(TrackerConfig::default(), "default");
-    let mut hog = TrackerConfig::default();
+    assert_look_alike_not_taken(filter_only(), "default");
+    let mut hog = filter_only();
     hog.features.colornames = false;
     hog.scale_filter.colornames = false;
     assert_look_alike_not_taken(hog, "without colour names");
@@ -89,7 +99,7 @@ fn look_alike_shown_while_hidden_is_not_taken() {
 /// (~0.6 against the target's ~0.9), so without the relative bound it is taken.
 #[test]
 fn without_the_relative_bound_the_look_alike_is_taken() {
-    let mut cfg = TrackerConfig::default();
+    let mut cfg = filter_only();
     cfg.redetection.reacquire_relative = 0.0;
     let seq = with_look_alike();
     let r = track_synthetic(&seq, cfg, seq.truth(0));
@@ -102,7 +112,7 @@ fn without_the_relative_bound_the_look_alike_is_taken() {
 
 #[test]
 fn learning_gate_never_skips_more_than_its_bound_in_a_row() {
-    let mut cfg = TrackerConfig::default();
+    let mut cfg = filter_only();
     // Never declare the target lost, so every frame goes through the gate.
     cfg.track_state.lost_frames = 10_000;
     cfg.verification.max_consecutive_skips = 3;
@@ -127,7 +137,7 @@ fn learning_gate_never_skips_more_than_its_bound_in_a_row() {
 fn reference() -> TrackerConfig {
     use bevt_core::config::{ScaleEstimator, TrainingSample};
     use bevt_core::filter::admm::PenaltyKind;
-    let mut cfg = TrackerConfig::default();
+    let mut cfg = filter_only();
     cfg.features.colornames = false;
     cfg.detection.scale_estimator = ScaleEstimator::Search;
     cfg.learning.training_sample = TrainingSample::Fresh;
@@ -137,10 +147,7 @@ fn reference() -> TrackerConfig {
 
 #[test]
 fn target_reentering_far_away_is_reacquired_quickly() {
-    for (cfg, what) in [
-        (TrackerConfig::default(), "default"),
-        (reference(), "reference"),
-    ] {
+    for (cfg, what) in [(filter_only(), "default"), (reference(), "reference")] {
         let seq = far_reentry();
         let r = track_synthetic(&seq, cfg, seq.truth(0));
         let states: Vec<TrackState> = r.iter().map(|(o, _)| o.state).collect();

@@ -17,3 +17,4 @@ mod ros_tools;
 mod security;
 mod synthetic;
 mod tool;
+mod verifier;
