@@ -404,9 +404,9 @@ pub struct RedetectionConfig {
 #[serde(rename_all = "snake_case")]
 pub enum VerifierKind {
     /// No verifier: the frozen filter decides alone.
-    #[default]
     None,
-    /// NanoTrack v2's backbone and head, template from the initial frame.
+    /// NanoTrack v2's backbone and head, template from the initial frame (the default).
+    #[default]
     Nanotrack,
 }
 
@@ -421,7 +421,7 @@ impl Default for RedetectionConfig {
             reacquire_relative: 0.5,
             reacquire_frames: 3,
             proposals: 4,
-            verifier: VerifierKind::None,
+            verifier: VerifierKind::Nanotrack,
             verifier_backbone: String::new(),
             verifier_head: String::new(),
             verifier_windows: 16,
@@ -1338,6 +1338,10 @@ mod tests {
         c.track_state = TrackStateConfig::default();
         c.redetection = RedetectionConfig::default();
         assert_eq!(c, TrackerConfig::default());
+        // Issue 9: the NanoTrack verifier, embedded models (no file at run time).
+        let r = &TrackerConfig::default().redetection;
+        assert_eq!(r.verifier, VerifierKind::Nanotrack);
+        assert!(r.verifier_backbone.is_empty() && r.verifier_head.is_empty());
     }
 
     #[test]
@@ -1361,6 +1365,7 @@ mod tests {
         assert_eq!(v.score, VerificationScore::Reference);
         assert_eq!((v.threshold_low, v.threshold_high), (0.2, 0.5));
         assert!(!c.redetection.enabled);
+        assert_eq!(c.redetection.verifier, VerifierKind::None);
         assert_eq!(c.track_state.lost_threshold, 0.0);
     }
 
