@@ -18,6 +18,11 @@
 //! sha256), so the default needs no file at run time; a path loads that file instead. Each
 //! network is optimised once per input size (backbone: 127 and 255; head: one plan) and run
 //! single-threaded.
+//!
+//! With the cargo feature `cnn`, `redetection.verifier: nanotrack_ort` runs the same models
+//! (same crops, scoring and acceptance) on ONNX Runtime instead (`NanoVerifier::new_ort`),
+//! one thread: ~7× faster per pass than tract here (README "Speed"), at the price of the
+//! shared library.
 
 use crate::error::TrackError;
 use crate::geometry::Point2;
@@ -113,6 +118,9 @@ pub enum NanoError {
         /// Output name.
         name: &'static str,
     },
+    /// ONNX Runtime could not be loaded (`nanotrack_ort` only).
+    #[error("redetection.verifier: nanotrack_ort: {0}")]
+    Runtime(String),
     /// Inference failed.
     #[error("{key}: {path}: inference failed: {reason}")]
     Run {
@@ -277,11 +285,33 @@ fn load(
     Ok((model, name))
 }
 
+/// The networks' runtime.
+enum Backend {
+    /// tract plans: backbone at 127 and at 255, head.
+    Tract {
+        template: Box<Net>,
+        search: Box<Net>,
+        head: Box<Net>,
+    },
+    /// ONNX Runtime sessions (cargo feature `cnn`).
+    #[cfg(feature = "cnn")]
+    Ort(Box<ort_backend::OrtNets>),
+}
+
+impl Backend {
+    /// Where the backbone and the head came from.
+    fn paths(&self) -> (&str, &str) {
+        match self {
+            Backend::Tract { search, head, .. } => (&search.path, &head.path),
+            #[cfg(feature = "cnn")]
+            Backend::Ort(o) => (&o.backbone_path, &o.head_path),
+        }
+    }
+}
+
 /// NanoTrack v2 backbone + head (see the module doc).
 pub struct NanoVerifier {
-    backbone_template: Net,
-    backbone_search: Net,
-    head: Net,
+    backend: Backend,
     template: Vec<f32>,
     input: Vec<f32>,
     search: Vec<f32>,
@@ -292,8 +322,8 @@ pub struct NanoVerifier {
 impl std::fmt::Debug for NanoVerifier {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("NanoVerifier")
-            .field("backbone", &self.backbone_search.path)
-            .field("head", &self.head.path)
+            .field("backbone", &self.backend.paths().0)
+            .field("head", &self.backend.paths().1)
             .field("template", &!self.template.is_empty())
             .finish()
     }
@@ -331,10 +361,28 @@ impl NanoVerifier {
             ],
             &["output1", "output2"],
         )?;
+        Self::checked(Backend::Tract {
+            template: Box::new(backbone_template),
+            search: Box::new(backbone_search),
+            head: Box::new(head),
+        })
+    }
+
+    /// The same models on ONNX Runtime (`runtime`, or `ORT_DYLIB_PATH` when empty; an empty
+    /// model path: the embedded file), one thread, all graph optimisations.
+    ///
+    /// # Errors
+    /// A [`NanoError`] naming the runtime or model problem.
+    #[cfg(feature = "cnn")]
+    pub fn new_ort(runtime: &str, backbone: &str, head: &str) -> Result<Self, NanoError> {
+        let nets = ort_backend::OrtNets::new(runtime, backbone, head)?;
+        Self::checked(Backend::Ort(Box::new(nets)))
+    }
+
+    /// The verifier on `backend`, checked on a grey template and search crop.
+    fn checked(backend: Backend) -> Result<Self, NanoError> {
         let mut v = Self {
-            backbone_template,
-            backbone_search,
-            head,
+            backend,
             template: Vec::new(),
             input: Vec::new(),
             search: Vec::new(),
@@ -359,7 +407,7 @@ impl NanoVerifier {
         if (side != TEMPLATE_SIDE && side != SEARCH_SIDE) || input.len() != 3 * side * side {
             return Err(NanoError::Run {
                 key: BACKBONE_KEY,
-                path: self.backbone_search.path.clone(),
+                path: self.backend.paths().0.to_string(),
                 reason: format!(
                     "input of {} values for side {side}; sides 127 and 255 are planned",
                     input.len()
@@ -386,7 +434,7 @@ impl NanoVerifier {
         if template.len() != CHANNELS * t * t || search.len() != CHANNELS * x * x {
             return Err(NanoError::Run {
                 key: HEAD_KEY,
-                path: self.head.path.clone(),
+                path: self.backend.paths().1.to_string(),
                 reason: format!(
                     "features of {} and {} values; expected {} and {}",
                     template.len(),
@@ -425,10 +473,17 @@ impl NanoVerifier {
     /// Backbone on `self.input` (`[1,3,side,side]`, side 127 or 255): the
     /// `[1,48,side/16,side/16]` features.
     fn run_backbone(&mut self, side: usize) -> Result<Vec<f32>, NanoError> {
+        let (template, search) = match &mut self.backend {
+            Backend::Tract {
+                template, search, ..
+            } => (template, search),
+            #[cfg(feature = "cnn")]
+            Backend::Ort(o) => return o.backbone(&self.input, side),
+        };
         let (net, cells) = if side == TEMPLATE_SIDE {
-            (&mut self.backbone_template, TEMPLATE_CELLS)
+            (template, TEMPLATE_CELLS)
         } else {
-            (&mut self.backbone_search, SEARCH_CELLS)
+            (search, SEARCH_CELLS)
         };
         let mut out = net.run(
             &[(&[1, 3, side, side], &self.input)],
@@ -441,7 +496,17 @@ impl NanoVerifier {
     /// and the four box distances, `(margins[256], loc[4·256])`.
     fn run_head(&mut self) -> Result<(Vec<f32>, Vec<f32>), NanoError> {
         let (t, x) = (TEMPLATE_CELLS, SEARCH_CELLS);
-        let mut out = self.head.run(
+        let head = match &mut self.backend {
+            Backend::Tract { head, .. } => head,
+            #[cfg(feature = "cnn")]
+            Backend::Ort(o) => {
+                let (cls, loc) = o.head(&self.template, &self.search)?;
+                let n = x * x;
+                let margins = (0..n).map(|i| cls[n + i] - cls[i]).collect();
+                return Ok((margins, loc));
+            }
+        };
+        let mut out = head.run(
             &[
                 (&[1, CHANNELS, t, t], &self.template),
                 (&[1, CHANNELS, x, x], &self.search),
@@ -507,5 +572,185 @@ impl Verifier for NanoVerifier {
             h: ((t + b) * px).max(1.0),
             score,
         }))
+    }
+}
+
+/// The ONNX Runtime backend (cargo feature `cnn`, `redetection.verifier: nanotrack_ort`).
+#[cfg(feature = "cnn")]
+mod ort_backend {
+    use super::{
+        NanoError, BACKBONE_KEY, CHANNELS, EMBEDDED, EMBEDDED_BACKBONE, EMBEDDED_HEAD, HEAD_KEY,
+        SEARCH_CELLS, TEMPLATE_CELLS,
+    };
+    use crate::features::cnn::load_runtime;
+    use ort::session::builder::GraphOptimizationLevel;
+    use ort::session::Session;
+    use ort::value::TensorRef;
+    use std::path::Path;
+
+    /// Backbone and head sessions.
+    pub(super) struct OrtNets {
+        backbone: Session,
+        head: Session,
+        pub(super) backbone_path: String,
+        pub(super) head_path: String,
+    }
+
+    /// A one-thread session of the file at `path` (empty: `embedded`).
+    fn session(
+        env: &ort::environment::Environment,
+        key: &'static str,
+        path: &str,
+        embedded: &[u8],
+    ) -> Result<(Session, String), NanoError> {
+        let name = if path.is_empty() { EMBEDDED } else { path };
+        let err = |reason: String| NanoError::Model {
+            key,
+            path: name.to_string(),
+            reason,
+        };
+        if !path.is_empty() && !Path::new(path).is_file() {
+            return Err(NanoError::ModelMissing {
+                key,
+                path: path.to_string(),
+            });
+        }
+        let mut b = Session::builder(env)
+            .map_err(|e| err(e.to_string()))?
+            .with_optimization_level(GraphOptimizationLevel::All)
+            .map_err(|e| err(e.to_string()))?
+            .with_intra_threads(1)
+            .map_err(|e| err(e.to_string()))?
+            .with_inter_threads(1)
+            .map_err(|e| err(e.to_string()))?;
+        let s = if path.is_empty() {
+            b.commit_from_memory(embedded)
+        } else {
+            b.commit_from_file(path)
+        }
+        .map_err(|e| err(e.to_string()))?;
+        Ok((s, name.to_string()))
+    }
+
+    /// The named output of `outputs`, checked to be `expected` and finite.
+    fn output(
+        outputs: &ort::session::SessionOutputs<'_>,
+        key: &'static str,
+        path: &str,
+        name: &'static str,
+        expected: &[usize],
+    ) -> Result<Vec<f32>, NanoError> {
+        let run = |reason: String| NanoError::Run {
+            key,
+            path: path.to_string(),
+            reason,
+        };
+        let value = outputs
+            .get(name)
+            .ok_or_else(|| run(format!("no output `{name}`")))?;
+        let (shape, data) = value
+            .try_extract_tensor::<f32>()
+            .map_err(|e| run(format!("{name}: {e}")))?;
+        let dims: Vec<usize> = shape.iter().map(|&d| d.max(0) as usize).collect();
+        if dims != expected {
+            return Err(NanoError::Shape {
+                key,
+                path: path.to_string(),
+                name,
+                shape: dims,
+                expected: expected.to_vec(),
+            });
+        }
+        if data.iter().any(|v| !v.is_finite()) {
+            return Err(NanoError::NonFinite {
+                key,
+                path: path.to_string(),
+                name,
+            });
+        }
+        Ok(data.to_vec())
+    }
+
+    impl OrtNets {
+        pub(super) fn new(runtime: &str, backbone: &str, head: &str) -> Result<Self, NanoError> {
+            let env = load_runtime(runtime).map_err(|e| NanoError::Runtime(e.to_string()))?;
+            let (backbone, backbone_path) =
+                session(&env, BACKBONE_KEY, backbone, EMBEDDED_BACKBONE)?;
+            let (head, head_path) = session(&env, HEAD_KEY, head, EMBEDDED_HEAD)?;
+            Ok(Self {
+                backbone,
+                head,
+                backbone_path,
+                head_path,
+            })
+        }
+
+        /// Backbone on a `[1,3,side,side]` input.
+        pub(super) fn backbone(
+            &mut self,
+            input: &[f32],
+            side: usize,
+        ) -> Result<Vec<f32>, NanoError> {
+            let run = |reason: String| NanoError::Run {
+                key: BACKBONE_KEY,
+                path: self.backbone_path.clone(),
+                reason,
+            };
+            let cells = if side == super::TEMPLATE_SIDE {
+                TEMPLATE_CELLS
+            } else {
+                SEARCH_CELLS
+            };
+            let t = TensorRef::from_array_view(([1usize, 3, side, side], input))
+                .map_err(|e| run(e.to_string()))?;
+            let outputs = self
+                .backbone
+                .run(ort::inputs!["input" => t])
+                .map_err(|e| run(e.to_string()))?;
+            output(
+                &outputs,
+                BACKBONE_KEY,
+                &self.backbone_path,
+                "output",
+                &[1, CHANNELS, cells, cells],
+            )
+        }
+
+        /// Head on the template and search features: raw `(cls, loc)`.
+        pub(super) fn head(
+            &mut self,
+            template: &[f32],
+            search: &[f32],
+        ) -> Result<(Vec<f32>, Vec<f32>), NanoError> {
+            let run = |reason: String| NanoError::Run {
+                key: HEAD_KEY,
+                path: self.head_path.clone(),
+                reason,
+            };
+            let (t, x) = (TEMPLATE_CELLS, SEARCH_CELLS);
+            let z = TensorRef::from_array_view(([1usize, CHANNELS, t, t], template))
+                .map_err(|e| run(e.to_string()))?;
+            let s = TensorRef::from_array_view(([1usize, CHANNELS, x, x], search))
+                .map_err(|e| run(e.to_string()))?;
+            let outputs = self
+                .head
+                .run(ort::inputs!["input1" => z, "input2" => s])
+                .map_err(|e| run(e.to_string()))?;
+            let cls = output(
+                &outputs,
+                HEAD_KEY,
+                &self.head_path,
+                "output1",
+                &[1, 2, x, x],
+            )?;
+            let loc = output(
+                &outputs,
+                HEAD_KEY,
+                &self.head_path,
+                "output2",
+                &[1, 4, x, x],
+            )?;
+            Ok((cls, loc))
+        }
     }
 }

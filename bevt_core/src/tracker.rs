@@ -460,6 +460,27 @@ impl BevtTracker {
                 )?;
                 Ok(Some(Box::new(v)))
             }
+            #[cfg(feature = "cnn")]
+            VerifierKind::NanotrackOrt => {
+                let runtime = spec
+                    .config
+                    .features
+                    .cnn
+                    .as_ref()
+                    .map_or("", |c| c.runtime.as_str());
+                let v = crate::redetect_nano::NanoVerifier::new_ort(
+                    runtime,
+                    &r.verifier_backbone,
+                    &r.verifier_head,
+                )?;
+                Ok(Some(Box::new(v)))
+            }
+            #[cfg(not(feature = "cnn"))]
+            VerifierKind::NanotrackOrt => Err(TrackError::Feature(
+                "redetection.verifier is nanotrack_ort but bevt_core was built without the \
+                 `cnn` cargo feature (build with --features cnn, or use nanotrack)"
+                    .into(),
+            )),
         }
     }
 

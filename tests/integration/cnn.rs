@@ -627,3 +627,46 @@ fn a_file_that_is_not_onnx_runtime_is_an_error_at_init() {
     assert!(stdout.contains("1 passed"), "{stdout}");
     assert!(stdout.contains("child: features.cnn.runtime"), "{stdout}");
 }
+
+/// `redetection.verifier: nanotrack_ort` runs the embedded NanoTrack v2 on ONNX Runtime:
+/// its backbone and head outputs equal tract's (to 1e-3 on the reference input), and the
+/// far re-entry is re-acquired on the same frame as under tract (61, returning on 50).
+#[test]
+fn nanotrack_ort_verifier_matches_the_tract_one() {
+    use bevt_core::redetect_nano::NanoVerifier;
+    let Some(rt) = runtime("nanotrack_ort_verifier_matches_the_tract_one") else {
+        return;
+    };
+    let mut o = NanoVerifier::new_ort(&rt, "", "").unwrap();
+    let mut t = NanoVerifier::new("", "").unwrap();
+    let side = 255;
+    let x: Vec<f32> = (0..3 * side * side)
+        .map(|i| ((i % 251) as f32 / 251.0) * 255.0)
+        .collect();
+    let z: Vec<f32> = x[..3 * 127 * 127].to_vec();
+    let max_diff = |a: &[f32], b: &[f32]| {
+        assert_eq!(a.len(), b.len());
+        a.iter()
+            .zip(b)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0f32, f32::max)
+    };
+    let (xo, xt) = (o.backbone(&x, 255).unwrap(), t.backbone(&x, 255).unwrap());
+    let (zo, zt) = (o.backbone(&z, 127).unwrap(), t.backbone(&z, 127).unwrap());
+    let (d_x, d_z) = (max_diff(&xo, &xt), max_diff(&zo, &zt));
+    let ((mo, lo), (mt, lt)) = (o.head(&zo, &xo).unwrap(), t.head(&zo, &xo).unwrap());
+    let (d_m, d_l) = (max_diff(&mo, &mt), max_diff(&lo, &lt));
+    println!("max |ort - tract|: backbone {d_x:e} / {d_z:e}, head {d_m:e} / {d_l:e}");
+    assert!(d_x < 1e-3 && d_z < 1e-3 && d_m < 1e-3 && d_l < 1e-2);
+    // Wrong runtime: a clear error naming the key.
+    let e = NanoVerifier::new_ort(&model("nanotrack/README.md"), "", "").unwrap_err();
+    assert!(e.to_string().contains("nanotrack_ort"), "{e}");
+
+    let seq = bevt_tests::scenes::far_reentry();
+    let mut cfg = TrackerConfig::default();
+    cfg.redetection.proposals = 0;
+    cfg.redetection.verifier = bevt_core::config::VerifierKind::NanotrackOrt;
+    let r = bevt_tests::track_synthetic(&seq, cfg, seq.truth(0));
+    let back = (50..seq.frames).find(|&t| r[t - 1].0.state == bevt_core::TrackState::Reacquired);
+    assert_eq!(back, Some(61));
+}
