@@ -29,6 +29,7 @@ use crate::geometry::Point2;
 use crate::image::{Frame, Patch, Sampler};
 use crate::redetect::{context_side, Verifier, VerifierHit};
 use std::path::Path;
+use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 use thiserror::Error;
 use tract_onnx::prelude::{
     tvec, DatumType, Framework, InferenceFact, InferenceModel, InferenceModelExt, Tensor,
@@ -144,7 +145,36 @@ const BACKBONE_KEY: &str = "redetection.verifier_backbone";
 /// Config key of the head path.
 const HEAD_KEY: &str = "redetection.verifier_head";
 
-/// One optimised network: its plan, a reusable run state, and where it came from.
+/// One optimised network's plan and where it came from (shared between verifiers).
+struct Planned {
+    plan: Arc<TypedSimplePlan>,
+    key: &'static str,
+    path: String,
+}
+
+/// The three optimised networks of one (backbone, head) pair.
+struct Plans {
+    template: Planned,
+    search: Planned,
+    head: Planned,
+}
+
+/// Optimised plans by `(verifier_backbone, verifier_head)` as configured (empty: embedded).
+/// Optimising the three networks takes ~0.1–0.2 s; every tracker of the process (each
+/// sequence of an evaluation, each node restart of the tracker) shares them and keeps only
+/// its own run states. A model file is therefore read once per process and path.
+type PlanCache = Mutex<Vec<((String, String), Arc<Plans>)>>;
+
+/// The process's [`PlanCache`].
+fn plan_cache() -> &'static PlanCache {
+    static CACHE: OnceLock<PlanCache> = OnceLock::new();
+    CACHE.get_or_init(|| Mutex::new(Vec::new()))
+}
+
+/// At most this many (backbone, head) pairs stay optimised (a process uses one).
+const MAX_CACHED_PLANS: usize = 4;
+
+/// One optimised network: its shared plan, a reusable run state, and where it came from.
 struct Net {
     state: TypedSimpleState,
     key: &'static str,
@@ -152,8 +182,24 @@ struct Net {
 }
 
 impl Net {
+    /// A run state of `p`.
+    fn new(p: &Planned) -> Result<Self, NanoError> {
+        let state = TypedSimpleState::new(&p.plan).map_err(|e| NanoError::Model {
+            key: p.key,
+            path: p.path.clone(),
+            reason: format!("{e:#}"),
+        })?;
+        Ok(Self {
+            state,
+            key: p.key,
+            path: p.path.clone(),
+        })
+    }
+}
+
+impl Planned {
     /// Optimises `model` with `inputs` (names and shapes) and `outputs` (names).
-    fn plan(
+    fn new(
         model: &InferenceModel,
         key: &'static str,
         path: &str,
@@ -180,14 +226,15 @@ impl Net {
                 .map_err(err)?;
         }
         let plan = TypedSimplePlan::new(m.into_optimized().map_err(err)?).map_err(err)?;
-        let state = TypedSimpleState::new(&plan).map_err(err)?;
         Ok(Self {
-            state,
+            plan,
             key,
             path: path.to_string(),
         })
     }
+}
 
+impl Net {
     /// Runs on `inputs` (`(shape, data)`), returning each output's data checked against
     /// `expected` (`(name, shape)`) and for finite values.
     fn run(
@@ -332,15 +379,42 @@ impl std::fmt::Debug for NanoVerifier {
 impl NanoVerifier {
     /// Loads both models (an empty path: the embedded NanoTrack v2 file), optimises the
     /// backbone for 127×127 and 255×255 inputs and the head, and checks them on a grey
-    /// template and search crop.
+    /// template and search crop — once per process and `(backbone, head)`: later verifiers
+    /// share the optimised plans (a model file is read once per process and path) and only make their own run states.
     ///
     /// # Errors
     /// A [`NanoError`] naming the key and the model problem.
     pub fn new(backbone: &str, head: &str) -> Result<Self, NanoError> {
+        let id = (backbone.to_string(), head.to_string());
+        let cached = plan_cache()
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .iter()
+            .find(|(k, _)| *k == id)
+            .map(|(_, p)| Arc::clone(p));
+        if let Some(plans) = cached {
+            // Checked when they were first optimised.
+            return Ok(Self::on(Self::tract_backend(&plans)?));
+        }
+        let plans = Arc::new(Self::optimise(backbone, head)?);
+        let v = Self::checked(Self::tract_backend(&plans)?)?;
+        let mut cache = plan_cache().lock().unwrap_or_else(PoisonError::into_inner);
+        if !cache.iter().any(|(k, _)| *k == id) {
+            if cache.len() >= MAX_CACHED_PLANS {
+                cache.remove(0);
+            }
+            cache.push((id, plans));
+        }
+        Ok(v)
+    }
+
+    /// Loads both models and optimises the backbone for 127×127 and 255×255 inputs and the
+    /// head.
+    fn optimise(backbone: &str, head: &str) -> Result<Plans, NanoError> {
         let (bb, bb_name) = load(BACKBONE_KEY, backbone, EMBEDDED_BACKBONE)?;
         let (hd, hd_name) = load(HEAD_KEY, head, EMBEDDED_HEAD)?;
         let backbone_plan = |side: usize| {
-            Net::plan(
+            Planned::new(
                 &bb,
                 BACKBONE_KEY,
                 &bb_name,
@@ -348,10 +422,10 @@ impl NanoVerifier {
                 &["output"],
             )
         };
-        let backbone_template = backbone_plan(TEMPLATE_SIDE)?;
-        let backbone_search = backbone_plan(SEARCH_SIDE)?;
+        let template = backbone_plan(TEMPLATE_SIDE)?;
+        let search = backbone_plan(SEARCH_SIDE)?;
         let (t, x) = (TEMPLATE_CELLS, SEARCH_CELLS);
-        let head = Net::plan(
+        let head = Planned::new(
             &hd,
             HEAD_KEY,
             &hd_name,
@@ -361,10 +435,19 @@ impl NanoVerifier {
             ],
             &["output1", "output2"],
         )?;
-        Self::checked(Backend::Tract {
-            template: Box::new(backbone_template),
-            search: Box::new(backbone_search),
-            head: Box::new(head),
+        Ok(Plans {
+            template,
+            search,
+            head,
+        })
+    }
+
+    /// Fresh run states of `plans`.
+    fn tract_backend(plans: &Plans) -> Result<Backend, NanoError> {
+        Ok(Backend::Tract {
+            template: Box::new(Net::new(&plans.template)?),
+            search: Box::new(Net::new(&plans.search)?),
+            head: Box::new(Net::new(&plans.head)?),
         })
     }
 
@@ -379,16 +462,21 @@ impl NanoVerifier {
         Self::checked(Backend::Ort(Box::new(nets)))
     }
 
-    /// The verifier on `backend`, checked on a grey template and search crop.
-    fn checked(backend: Backend) -> Result<Self, NanoError> {
-        let mut v = Self {
+    /// The verifier on `backend`, without a template.
+    fn on(backend: Backend) -> Self {
+        Self {
             backend,
             template: Vec::new(),
             input: Vec::new(),
             search: Vec::new(),
             sampler: Sampler::default(),
             patch: Patch::default(),
-        };
+        }
+    }
+
+    /// The verifier on `backend`, checked on a grey template and search crop.
+    fn checked(backend: Backend) -> Result<Self, NanoError> {
+        let mut v = Self::on(backend);
         v.input = vec![128.0; 3 * TEMPLATE_SIDE * TEMPLATE_SIDE];
         v.template = v.run_backbone(TEMPLATE_SIDE)?;
         v.input = vec![128.0; 3 * SEARCH_SIDE * SEARCH_SIDE];

@@ -259,3 +259,38 @@ fn nanotrack_verifier_takes_the_look_alike_then_releases_it_for_the_target() {
         assert!(e < 8.0, "frame {t}: centre error {e}");
     }
 }
+
+/// Verifiers of one process share the optimised plans: a second verifier of the same files
+/// gives bit-identical features without reading the file again (it is gone by then), and
+/// a failed load is not cached (the next attempt reads the file anew).
+#[test]
+fn verifiers_share_optimised_plans_within_a_process() {
+    let dir = std::env::temp_dir().join(format!("bevt_verifier_cache_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("backbone.onnx");
+    let p = path.display().to_string();
+    // Not there yet: an error, and nothing is cached for the path.
+    assert!(matches!(
+        NanoVerifier::new(&p, ""),
+        Err(NanoError::ModelMissing { .. })
+    ));
+    std::fs::copy(model(BACKBONE), &path).unwrap();
+    let (x, _) = reference_inputs();
+    let first = NanoVerifier::new(&p, "")
+        .unwrap()
+        .backbone(&x, 255)
+        .unwrap();
+    std::fs::remove_file(&path).unwrap();
+    let mut again = NanoVerifier::new(&p, "").expect("the plans of a loaded path are kept");
+    assert_eq!(again.backbone(&x, 255).unwrap(), first);
+    // The embedded files under tract are the same network: the same features.
+    let embedded = NanoVerifier::new("", "")
+        .unwrap()
+        .backbone(&x, 255)
+        .unwrap();
+    assert_eq!(embedded, first);
+    // Another path is still checked.
+    let other = dir.join("other.onnx").display().to_string();
+    assert!(NanoVerifier::new(&other, "").is_err());
+    std::fs::remove_dir_all(&dir).ok();
+}
