@@ -410,8 +410,8 @@ pub enum VerifierKind {
     #[default]
     Nanotrack,
     /// The same networks on ONNX Runtime (cargo feature `cnn` and the runtime, from
-    /// `features.cnn.runtime` or `ORT_DYLIB_PATH`): same outputs, ~7× faster per pass than
-    /// tract here.
+    /// `features.cnn.runtime` or `ORT_DYLIB_PATH`): same outputs, ~4× faster per pass than
+    /// tract in a release build here (README "Speed"); what the CNN presets use.
     NanotrackOrt,
 }
 

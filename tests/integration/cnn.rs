@@ -557,7 +557,7 @@ fn cnn_presets_parse_and_validate() {
         // models; every other re-detection key is the default's.
         let mut redetection = c.redetection.clone();
         if one_pass {
-            assert_eq!(redetection.verifier, VerifierKind::Nanotrack, "{p}");
+            assert_eq!(redetection.verifier, VerifierKind::NanotrackOrt, "{p}");
             for m in [&redetection.verifier_backbone, &redetection.verifier_head] {
                 assert!(std::path::Path::new(m).is_file(), "{p}: {m} is not shipped");
             }
