@@ -7,7 +7,7 @@ pub mod scenes;
 
 use bevt_core::eval::synth::SynthParams;
 use bevt_core::{BBox, BevtTracker, Frame, PixelFormat, TrackOutput, Tracker, TrackerConfig};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// The dev dataset beside the project (`../shared/datasets/uav123_10fps_dev`), if present.
 pub fn dev_dataset() -> Option<PathBuf> {
@@ -89,4 +89,67 @@ pub fn wait_status(
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
     None
+}
+
+/// A DDS domain id that no other test of any concurrently running test process holds.
+///
+/// Every DDS test takes its domain here, so two test files (or two `cargo test` runs) can
+/// never meet on one domain. A claim is a file `bevt_dds_domains/<id>` in the temporary
+/// folder holding the claiming process id; it lasts for the process, and a claim whose
+/// process has ended is taken over. Domains 10..=232 are handed out (below 10 is left to
+/// people's own ROS graphs on the same machine; 232 is the highest id RTPS port numbers
+/// allow).
+pub fn dds_domain() -> u16 {
+    use std::io::Write;
+    static NEXT: std::sync::atomic::AtomicU16 = std::sync::atomic::AtomicU16::new(0);
+    const FIRST: u16 = 10;
+    const LAST: u16 = 232;
+    let dir = std::env::temp_dir().join("bevt_dds_domains");
+    std::fs::create_dir_all(&dir).expect("create the domain claim folder");
+    let me = std::process::id();
+    let span = LAST - FIRST + 1;
+    // Start each process at a different place so that claims rarely collide.
+    let start = (me % u32::from(span)) as u16;
+    loop {
+        let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        assert!(n < span, "all DDS domains {FIRST}..={LAST} are claimed");
+        let id = FIRST + (start + n) % span;
+        let path = dir.join(id.to_string());
+        let claim = || {
+            std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(&path)
+                .and_then(|mut f| write!(f, "{me}"))
+        };
+        if claim().is_ok() {
+            return id;
+        }
+        let owner: Option<u32> = std::fs::read_to_string(&path)
+            .ok()
+            .and_then(|s| s.trim().parse().ok());
+        let alive = owner.is_some_and(|p| Path::new(&format!("/proc/{p}")).exists());
+        if !alive && std::fs::remove_file(&path).is_ok() && claim().is_ok() {
+            return id;
+        }
+    }
+}
+
+/// Whether this is a CI run (`CI=true`), where every component `.ci/run` installs is
+/// present, so a test that would skip for want of one must fail instead.
+pub fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true" || v == "1")
+}
+
+/// Skips the calling test with `reason` (printed in the normal test output), except under
+/// `CI=true`, where the missing component is a CI defect and the test fails.
+///
+/// Call as `return skip("test_name", reason)` from a test whose prerequisite is missing.
+#[track_caller]
+#[allow(clippy::panic)] // failing the test is the point under CI
+pub fn skip(test: &str, reason: impl std::fmt::Display) {
+    if in_ci() {
+        panic!("{test}: would skip under CI=true, where .ci/run installs what it needs: {reason}");
+    }
+    println!("SKIPPED {test}: {reason}");
 }
