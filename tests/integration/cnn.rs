@@ -27,7 +27,10 @@ fn runtime(test: &str) -> Option<String> {
     match std::env::var(ORT_DYLIB_ENV) {
         Ok(p) if std::path::Path::new(&p).is_file() => Some(p),
         _ => {
-            println!("SKIPPED {test}: {ORT_DYLIB_ENV} does not name an ONNX Runtime library (run scripts/onnxruntime.sh)");
+            bevt_tests::skip(
+                test,
+                format!("{ORT_DYLIB_ENV} does not name an ONNX Runtime library (run scripts/onnxruntime.sh)"),
+            );
             None
         }
     }

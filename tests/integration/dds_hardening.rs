@@ -32,11 +32,6 @@ const MEMORY_MARGIN_KIB: u64 = 256 * 1024;
 /// Discovery and matching take about this long on loopback.
 const DISCOVERY: Duration = Duration::from_millis(1500);
 
-/// A domain per test and per process (node.rs uses 100.., interop 200..).
-fn domain(k: u16) -> u16 {
-    20 + (std::process::id() % 25) as u16 * 3 + k
-}
-
 /// The node process; killed (and its stdin closed) when dropped.
 struct NodeProcess(Child);
 
@@ -385,7 +380,7 @@ fn detections(p: &Peers, dur: Duration, tol: f32) -> (usize, usize) {
 
 #[test]
 fn crafted_datafrag_floods_leave_the_node_alive_bounded_and_tracking() {
-    let d = domain(0);
+    let d = bevt_tests::dds_domain();
     let mut node = NodeProcess::spawn(d);
     let p = peers(d);
     assert!(reinit(&p), "the node refused a valid reinit");
@@ -425,7 +420,7 @@ fn crafted_datafrag_floods_leave_the_node_alive_bounded_and_tracking() {
 
 #[test]
 fn with_loopback_configured_no_socket_listens_elsewhere() {
-    let node = NodeProcess::spawn(domain(1));
+    let node = NodeProcess::spawn(bevt_tests::dds_domain());
     let sockets = node.wait_for_sockets();
     println!("node sockets: {sockets:?}");
     for (addr, port) in &sockets {

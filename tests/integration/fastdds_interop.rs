@@ -44,7 +44,10 @@ fn a_fast_dds_peer_with_the_rmw_fastrtps_mapping_drives_the_node() {
     let peer = match fastdds_peer() {
         Ok(p) => p,
         Err(e) => {
-            println!("SKIPPED a_fast_dds_peer_with_the_rmw_fastrtps_mapping_drives_the_node: {e}");
+            bevt_tests::skip(
+                "a_fast_dds_peer_with_the_rmw_fastrtps_mapping_drives_the_node",
+                e,
+            );
             return;
         }
     };
@@ -52,9 +55,7 @@ fn a_fast_dds_peer_with_the_rmw_fastrtps_mapping_drives_the_node() {
     let truth = write_frames(&dir);
     let meta: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("meta.json")).unwrap()).unwrap();
-    // A domain none of the other tests of this process uses (node_limits 1..18, the DDS
-    // hardening tests 20..94, node.rs 100..219, interop 200..229, ros_tools 19, 220, 221).
-    let domain = 95 + (std::process::id() % 5) as u16;
+    let domain = bevt_tests::dds_domain();
     // The node's default settings: Enhanced (Fast DDS) service mapping.
     let settings = RosSettings {
         domain_id: domain,

@@ -85,13 +85,16 @@ fn an_independent_cyclone_dds_peer_drives_the_node() {
     let py = match python() {
         Ok(p) => p,
         Err(e) => {
-            println!("SKIPPED an_independent_cyclone_dds_peer_drives_the_node: no Python environment ({e})");
+            bevt_tests::skip(
+                "an_independent_cyclone_dds_peer_drives_the_node",
+                format!("no Python environment ({e})"),
+            );
             return;
         }
     };
     let dir = temp_dir("interop");
     let truth = write_frames(&dir);
-    let domain = 200 + (std::process::id() % 30) as u16;
+    let domain = bevt_tests::dds_domain();
     let settings = RosSettings {
         domain_id: domain,
         service_mapping: ServiceMapping::Cyclone,

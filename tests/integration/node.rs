@@ -24,11 +24,6 @@ fn node_settings() -> NodeSettings {
     }
 }
 
-/// A domain per test and per process, so parallel tests and runs do not meet.
-fn domain(k: u16) -> u16 {
-    100 + (std::process::id() % 30) as u16 * 4 + k
-}
-
 struct Running {
     stop: Arc<AtomicBool>,
     node: Option<std::thread::JoinHandle<()>>,
@@ -49,19 +44,16 @@ impl Drop for Running {
     }
 }
 
-fn start(k: u16) -> Running {
-    start_with(
-        k,
-        SynthParams {
-            frames: 200,
-            ..SynthParams::default()
-        },
-    )
+fn start() -> Running {
+    start_with(SynthParams {
+        frames: 200,
+        ..SynthParams::default()
+    })
 }
 
-fn start_with(k: u16, seq: SynthParams) -> Running {
+fn start_with(seq: SynthParams) -> Running {
     let settings = RosSettings {
-        domain_id: domain(k),
+        domain_id: bevt_tests::dds_domain(),
         ..RosSettings::default()
     };
     let stop = Arc::new(AtomicBool::new(false));
@@ -141,7 +133,7 @@ fn collect(r: &Running, dur: Duration, tol: f32) -> (usize, usize) {
 
 #[test]
 fn node_tracks_after_a_delayed_reinit_over_dds() {
-    let r = start(0);
+    let r = start();
     let (stamp, b) = delayed_truth(&r, Duration::from_millis(300));
     let resp =
         r.gs.reinit(&request(b, stamp), Duration::from_secs(10))
@@ -156,7 +148,7 @@ fn node_tracks_after_a_delayed_reinit_over_dds() {
 
 #[test]
 fn bad_reinit_requests_are_refused_and_the_node_keeps_running() {
-    let r = start(1);
+    let r = start();
     let (stamp, b) = delayed_truth(&r, Duration::from_millis(100));
     for bad in [
         request(BBox::new(f32::NAN, 1.0, 10.0, 10.0), 0),
@@ -187,14 +179,11 @@ fn bad_reinit_requests_are_refused_and_the_node_keeps_running() {
 fn lost_target_is_published_with_empty_detections_and_reinit_clears_it_over_dds() {
     use bevt_msgs::bevt::TrackStatus;
     // The target disappears 3 s into the sequence (20 Hz) and does not come back.
-    let r = start_with(
-        3,
-        SynthParams {
-            frames: 600,
-            hidden: Some((60, 600)),
-            ..SynthParams::default()
-        },
-    );
+    let r = start_with(SynthParams {
+        frames: 600,
+        hidden: Some((60, 600)),
+        ..SynthParams::default()
+    });
     let (stamp, b) = delayed_truth(&r, Duration::from_millis(100));
     let resp =
         r.gs.reinit(&request(b, stamp), Duration::from_secs(10))
@@ -277,7 +266,7 @@ mod topics_and_bad_input {
     #[test]
     fn init_topic_compressed_input_and_bad_images_over_dds() {
         let settings = RosSettings {
-            domain_id: domain(2),
+            domain_id: bevt_tests::dds_domain(),
             ..RosSettings::default()
         };
         let stop = Arc::new(AtomicBool::new(false));

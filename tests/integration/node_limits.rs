@@ -19,12 +19,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-/// A domain per test and per process (node.rs uses 100.., interop 200.., the DDS
-/// hardening tests 20..94).
-fn domain(k: u16) -> u16 {
-    1 + (std::process::id() % 6) as u16 * 3 + k
-}
-
 /// The node in a thread; stopped and joined when dropped.
 struct Node {
     stop: Arc<AtomicBool>,
@@ -56,9 +50,9 @@ impl Drop for Node {
     }
 }
 
-fn settings(k: u16) -> RosSettings {
+fn settings() -> RosSettings {
     RosSettings {
-        domain_id: domain(k),
+        domain_id: bevt_tests::dds_domain(),
         ..RosSettings::default()
     }
 }
@@ -157,7 +151,7 @@ const BOMB_ROUNDS: usize = 4;
 
 #[test]
 fn image_bombs_and_truncated_frames_are_refused_without_memory_or_track_loss() {
-    let s = settings(0);
+    let s = settings();
     let _node = Node::start(&s, NodeSettings::default());
     let peer = RawPeer::new(&s).unwrap();
     let gs = GroundStation::new(&s).unwrap();
@@ -249,7 +243,7 @@ const MIN_FRAMES_DURING_BURST: u32 = 10;
 
 #[test]
 fn a_reinit_burst_is_answered_in_full_while_the_camera_keeps_being_tracked() {
-    let s = settings(1);
+    let s = settings();
     let node_settings = NodeSettings::default();
     let (rate, burst) = (node_settings.reinit_rate_hz, node_settings.reinit_burst);
     let _node = Node::start(&s, node_settings);
@@ -364,7 +358,7 @@ fn a_reinit_burst_is_answered_in_full_while_the_camera_keeps_being_tracked() {
 fn big_endian_cdr_images_are_accepted() {
     use bevt_node::node::ros::names;
     use ros2_client::dds::rustdds;
-    let s = settings(2);
+    let s = settings();
     let _node = Node::start(&s, NodeSettings::default());
     let gs = GroundStation::new(&s).unwrap();
     // A plain DDS writer with the CDR_BE encapsulation (ros2-client always writes LE).
@@ -460,7 +454,10 @@ fn an_independent_cyclone_peer_sends_the_bomb_set_and_the_track_survives() {
     let py = match crate::interop::python() {
         Ok(p) => p,
         Err(e) => {
-            println!("SKIPPED an_independent_cyclone_peer_sends_the_bomb_set_and_the_track_survives: no Python environment ({e})");
+            bevt_tests::skip(
+                "an_independent_cyclone_peer_sends_the_bomb_set_and_the_track_survives",
+                format!("no Python environment ({e})"),
+            );
             return;
         }
     };
@@ -495,7 +492,7 @@ fn an_independent_cyclone_peer_sends_the_bomb_set_and_the_track_survives() {
     });
     std::fs::write(dir.join("plan.json"), plan.to_string()).unwrap();
     // The node, recording every status it publishes.
-    let s = settings(3);
+    let s = settings();
     let seen: Arc<Mutex<Vec<TrackStatus>>> = Arc::default();
     let stop = Arc::new(AtomicBool::new(false));
     let core = NodeCore::new(
@@ -650,7 +647,7 @@ fn process_memory(pid: u32) -> (u64, u64) {
 #[test]
 fn a_separate_node_process_stays_within_twice_its_steady_memory_under_the_bomb_set() {
     use std::process::{Command, Stdio};
-    let s = settings(4);
+    let s = settings();
     // The node as its own process (stops when its stdin closes).
     let mut child = Command::new(env!("CARGO_BIN_EXE_bevt_node_under_test"))
         .args(["--ros-args", "-p", &format!("domain_id:={}", s.domain_id)])

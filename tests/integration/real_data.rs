@@ -15,7 +15,10 @@ const BUILDING4_MIN_AUC: f64 = 0.65;
 #[test]
 fn building4_accuracy_does_not_regress() {
     let Some(root) = dev_dataset() else {
-        println!("SKIPPED building4_accuracy_does_not_regress: ../shared/datasets/uav123_10fps_dev is absent");
+        bevt_tests::skip(
+            "building4_accuracy_does_not_regress",
+            "../shared/datasets/uav123_10fps_dev is absent",
+        );
         return;
     };
     let mut ds = open_dataset(&root).unwrap();

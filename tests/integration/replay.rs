@@ -39,7 +39,7 @@ fn bags() -> Option<&'static Bags> {
         let py = match python() {
             Ok(p) => p,
             Err(e) => {
-                println!("SKIPPED replay tests: no Python environment ({e})");
+                bevt_tests::skip("replay tests", format!("no Python environment ({e})"));
                 return None;
             }
         };
@@ -420,7 +420,10 @@ fn bad_input_is_a_clear_error_or_a_counted_skip_and_results_are_kept() {
 fn a_replayed_dev_sequence_gives_the_boxes_of_bevt_eval() {
     const N: usize = 40;
     let Some(root) = dev_dataset() else {
-        println!("SKIPPED a_replayed_dev_sequence_gives_the_boxes_of_bevt_eval: ../shared absent");
+        bevt_tests::skip(
+            "a_replayed_dev_sequence_gives_the_boxes_of_bevt_eval",
+            "../shared absent",
+        );
         return;
     };
     let Some(b) = bags() else { return };

@@ -13,18 +13,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-/// A domain none of the other tests of this process uses (node_limits 1..18, the DDS
-/// hardening tests 20..94, fastdds_interop 95..99, node.rs 100..219, interop 200..229)
-/// and outside the soak benchmark's (224 and up): 19, and 220 or 221.
-fn domain(k: u16) -> u16 {
-    let interop = 200 + (std::process::id() % 30) as u16;
-    match k {
-        0 => 19,
-        _ if interop == 220 => 221,
-        _ => 220,
-    }
-}
-
 /// The node in a thread; stopped and joined when dropped.
 struct Node {
     stop: Arc<AtomicBool>,
@@ -82,7 +70,7 @@ fn png(seq: &SynthParams, t: usize) -> CompressedImage {
 fn a_remapped_raw_topic_takes_the_compressed_input_with_it() {
     // `ros2 run bevt_node bevt_node --ros-args -r image_raw:=/camera/image_raw`
     let settings = RosSettings {
-        domain_id: domain(0),
+        domain_id: bevt_tests::dds_domain(),
         remaps: vec![("image_raw".into(), "/camera/image_raw".into())],
         ..RosSettings::default()
     };
@@ -215,13 +203,16 @@ fn ros2_param_round_trip_with_an_independent_cyclone_dds_client() {
     use bevt_msgs::bevt::TrackStatus;
     use bevt_node::node::sim::spawn_camera;
     let settings = RosSettings {
-        domain_id: domain(1),
+        domain_id: bevt_tests::dds_domain(),
         // The peer speaks rmw_cyclonedds' service mapping.
         service_mapping: ros2_client::ServiceMapping::Cyclone,
         ..RosSettings::default()
     };
     if let Err(e) = crate::interop::python() {
-        println!("SKIPPED ros2_param_round_trip_with_an_independent_cyclone_dds_client: no Python environment ({e})");
+        bevt_tests::skip(
+            "ros2_param_round_trip_with_an_independent_cyclone_dds_client",
+            format!("no Python environment ({e})"),
+        );
         return;
     }
     let node = start(&settings);

@@ -32,9 +32,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-/// Domains of these tests (the other modules use 1..=94 and 100..=229).
-fn domain(k: u16) -> u16 {
-    95 + k
+/// The domain of `start_up_follows_the_ros_security_environment`: its node processes and
+/// its in-process peer meet there.
+fn startup_domain() -> u16 {
+    static D: std::sync::OnceLock<u16> = std::sync::OnceLock::new();
+    *D.get_or_init(bevt_tests::dds_domain)
 }
 
 /// How long each would-be commander keeps trying: longer than discovery and the
@@ -50,7 +52,10 @@ const TOLERANCE_PX: f32 = 5.0;
 /// printed) without openssl.
 fn keystore(name: &str) -> Option<PathBuf> {
     if Command::new("openssl").arg("version").output().is_err() {
-        println!("security: SKIPPED, openssl not found (scripts/make-keystore.sh needs it)");
+        bevt_tests::skip(
+            name,
+            "openssl not found (scripts/make-keystore.sh needs it)",
+        );
         return None;
     }
     let dir = temp_dir(name);
@@ -270,7 +275,7 @@ fn only_the_authorised_ground_station_commands_the_secured_node() {
     let Some(ks) = keystore("sec_session") else {
         return;
     };
-    let d = domain(0);
+    let d = bevt_tests::dds_domain();
     let t0 = Instant::now();
     let node_settings = settings(d, &ks, Some("bevt_node"));
     let stop = Arc::new(AtomicBool::new(false));
@@ -460,7 +465,7 @@ fn start_node(
     }
     let mut child = cmd
         .envs(env.iter().copied())
-        .env("ROS_DOMAIN_ID", domain(1).to_string())
+        .env("ROS_DOMAIN_ID", startup_domain().to_string())
         .args(args)
         .stdin(Stdio::piped())
         .stdout(Stdio::null())
@@ -503,7 +508,7 @@ fn start_up_follows_the_ros_security_environment() {
             return;
         }
         let s = RosSettings {
-            domain_id: domain(1),
+            domain_id: startup_domain(),
             ..RosSettings::default()
         };
         let c = Commander::new(&s).unwrap();
@@ -628,10 +633,10 @@ fn secured_delivery(tag: &str, d: u16, readers: usize) -> Option<Duration> {
 
 #[test]
 fn a_secured_writer_reaches_one_reader() {
-    secured_delivery("sec_one_reader", domain(2), 1);
+    secured_delivery("sec_one_reader", bevt_tests::dds_domain(), 1);
 }
 
 #[test]
 fn a_secured_writer_reaches_two_readers_of_one_topic_in_a_participant() {
-    secured_delivery("sec_two_readers", domain(3), 2);
+    secured_delivery("sec_two_readers", bevt_tests::dds_domain(), 2);
 }
