@@ -1,17 +1,29 @@
 #!/usr/bin/env bash
 # Checks that colcon (from PyPI, no ROS installation) builds bevt_node as an ament_cargo
 # package and installs its executables where `ros2 run bevt_node bevt_node` looks for them.
+#
+# colcon-ros-cargo passes `--target-dir <build-base>/bevt_node` to cargo; that folder is made
+# a link to this workspace's target/ so colcon reuses what cargo already built instead of
+# compiling everything a second time. The cargo profile is the first argument (default
+# `dev`, what `cargo test` just built in CI; `flight` for the binaries that fly).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
+profile=${1:-dev}
 py=$(scripts/python-env.sh)
 if ! command -v cargo-ament-build >/dev/null 2>&1; then
   cargo install --locked cargo-ament-build@0.1.11
 fi
+# cargo-ament-build looks for the binaries in target/<profile name>, except for the dev
+# profile, whose folder is target/debug: pass no profile for dev.
+cargo_args=()
+[ "$profile" = dev ] || cargo_args=(--cargo-args --profile "$profile")
 ws=$(mktemp -d)
 trap 'rm -rf "$ws"' EXIT
+mkdir -p "$ws/build" "$root/target"
+ln -s "$root/target" "$ws/build/bevt_node"
 (cd "$ws" && "$(dirname "$py")/colcon" build --base-paths "$root/bevt_node" --packages-select bevt_node \
-   > "$ws/colcon.log" 2>&1) || { cat "$ws/colcon.log"; exit 1; }
+   "${cargo_args[@]}" > "$ws/colcon.log" 2>&1) || { cat "$ws/colcon.log"; exit 1; }
 for exe in bevt_node bevt bevt_latency; do
   test -x "$ws/install/bevt_node/lib/bevt_node/$exe" || { echo "colcon did not install $exe"; ls -R "$ws/install"; exit 1; }
 done
@@ -19,4 +31,4 @@ test -f "$ws/install/bevt_node/share/bevt_node/package.xml"
 # The installed executable runs (and rejects a bad argument with a clear message).
 out=$("$ws/install/bevt_node/lib/bevt_node/bevt_node" --bogus-flag 2>&1 || true)
 grep -q "unknown argument" <<<"$out"
-echo "colcon: bevt_node installed to install/bevt_node/lib/bevt_node/ (bevt_node, bevt, bevt_latency)"
+echo "colcon: bevt_node ($profile profile) installed to install/bevt_node/lib/bevt_node/ (bevt_node, bevt, bevt_latency)"

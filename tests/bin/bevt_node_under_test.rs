@@ -6,7 +6,7 @@
 //! closes, so it never outlives the test that started it.
 
 use bevt_node::node::app::NodeCore;
-use bevt_node::node::node_params::launch_from_args;
+use bevt_node::node::node_params::{launch_from_args, wants_help, USAGE};
 use bevt_node::node::ros;
 use std::io::Read;
 use std::process::ExitCode;
@@ -15,6 +15,10 @@ use std::sync::Arc;
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
+    if wants_help(&args) {
+        print!("bevt_node_under_test: bevt_node for tests (runs until its standard input closes)\n\n{USAGE}");
+        return ExitCode::SUCCESS;
+    }
     let launch = match launch_from_args(&args, |k| std::env::var(k).ok()) {
         Ok(l) => l,
         Err(e) => {

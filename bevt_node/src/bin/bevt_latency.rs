@@ -19,6 +19,10 @@ use std::time::{Duration, Instant};
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.iter().any(|a| a == "-h" || a == "--help") {
+        println!("bevt_latency: latency of the ROS 2 node over DDS on loopback (a benchmark, not a test)\n\nUsage: bevt_latency [SECONDS (20)] [RATE_HZ (30)] [DOMAIN (77)]\n\nA synthetic camera publishes 1280x720 rgb8 frames at RATE_HZ for SECONDS; the node tracks;\na ground station measures image stamp -> detection arrival and prints p50/p90/p99/max.");
+        return Ok(());
+    }
     let seconds: f64 = args
         .first()
         .map_or(Ok(20.0), |s| s.parse())

@@ -10,7 +10,7 @@ use bevt_msgs::builtin_interfaces::Time;
 use bevt_node::convert::bbox_from_detection;
 use bevt_node::convert::reinit_request;
 use bevt_node::node::app::NodeCore;
-use bevt_node::node::node_params::{launch_from_args, Launch};
+use bevt_node::node::node_params::{launch_from_args, wants_help, Launch, USAGE};
 use bevt_node::node::ros;
 use bevt_node::node::sim::{spawn_camera, GroundStation};
 use std::process::ExitCode;
@@ -131,6 +131,10 @@ fn demo(launch: Launch, stop: Arc<AtomicBool>) -> Result<()> {
 
 fn run() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
+    if wants_help(&args) {
+        print!("{USAGE}");
+        return Ok(());
+    }
     let launch = launch_from_args(&args, |k| std::env::var(k).ok())?;
     let stop = Arc::new(AtomicBool::new(false));
     let s = stop.clone();

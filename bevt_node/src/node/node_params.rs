@@ -182,6 +182,40 @@ pub fn params_from_file(
     Ok(out)
 }
 
+/// What `bevt_node --help` prints.
+pub const USAGE: &str = "\
+bevt_node: the BEVT-rs ROS 2 tracking node (pure Rust: ros2-client over RustDDS)
+
+Usage:
+  ros2 run bevt_node bevt_node [--ros-args ARGS...]
+  bevt_node --demo [--duration SECONDS]
+  bevt_node --help | -h
+
+Node options:
+  --demo              run with an in-process synthetic camera and a simulated ground station
+                      that initialises the track; prints the track once per second
+  --duration S        how long the demo runs (default 10 s)
+  -h, --help          print this and exit
+
+ROS arguments (after --ros-args, as rcl takes them):
+  --params-file FILE  a ROS 2 parameters file (bevt_node: ros__parameters: ...); repeatable
+  -p NAME:=VALUE      one parameter (node parameters and tracker.* keys); repeatable
+  -r FROM:=TO         a topic remap, or __ns:=/ns, __node:=name; repeatable
+  -e, --enclave PATH  the DDS Security enclave (with ROS_SECURITY_ENABLE=true)
+
+Environment: ROS_DOMAIN_ID, ROS_SECURITY_ENABLE, ROS_SECURITY_STRATEGY,
+ROS_SECURITY_KEYSTORE, ROS_SECURITY_ENCLAVE_OVERRIDE.
+Parameters, topics and services: docs/ros.md and docs/configuration.md.
+";
+
+/// Whether the command line asks for the usage text: `-h` or `--help` among the node's own
+/// arguments (before `--ros-args`).
+pub fn wants_help(args: &[String]) -> bool {
+    args.iter()
+        .take_while(|a| a.as_str() != "--ros-args")
+        .any(|a| a == "-h" || a == "--help")
+}
+
 /// The command line, parsed but not yet interpreted.
 #[derive(Default)]
 struct CommandLine {
