@@ -27,7 +27,13 @@ ln -s "$root/target" "$ws/build/bevt_node"
 for exe in bevt_node bevt bevt_latency; do
   test -x "$ws/install/bevt_node/lib/bevt_node/$exe" || { echo "colcon did not install $exe"; ls -R "$ws/install"; exit 1; }
 done
-test -f "$ws/install/bevt_node/share/bevt_node/package.xml"
+share="$ws/install/bevt_node/share/bevt_node"
+test -f "$share/package.xml"
+# The launch file, the parameters file and every tracker preset are installed with it.
+for f in launch/bevt.launch.py config/node.yaml config/bevt.yaml config/cnn_fusion.yaml; do
+  test -f "$share/$f" || { echo "colcon did not install share/bevt_node/$f"; exit 1; }
+done
+"$py" -m py_compile "$share/launch/bevt.launch.py"
 # The installed executable runs (and rejects a bad argument with a clear message).
 out=$("$ws/install/bevt_node/lib/bevt_node/bevt_node" --bogus-flag 2>&1 || true)
 grep -q "unknown argument" <<<"$out"
