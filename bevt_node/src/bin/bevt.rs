@@ -11,21 +11,14 @@ use bevt_core::eval::synth::SynthParams;
 use bevt_core::{BBox, BevtTracker, Frame, PixelFormat, Tracker};
 use bevt_node::node::node_params::launch_from_args;
 use bevt_node::params::load_config;
-use bevt_node::tool::dataset::{
-    format_annotation_row, image_files, open_dataset, parse_annotation,
-};
-use bevt_node::tool::plots::{plot_curves, Curve};
+use bevt_node::tool::dataset::{format_annotation_row, image_files, parse_annotation};
+use bevt_node::tool::eval::{parse_compare, EvalOptions};
 use bevt_node::tool::replay::{
     decode_only, parse_box as parse_replay_box, parse_reinit_file, parse_time_ns, InitAt,
     ReplayOptions, ReplaySummary,
 };
-use bevt_node::tool::report::{
-    build_summary, console_table, summarize_run, write_result_file, write_summary,
-};
-use bevt_node::tool::runner::{decode_ahead, run_sequence, track_feed};
+use bevt_node::tool::runner::{decode_ahead, track_feed};
 use clap::{Args, Parser, Subcommand};
-use indicatif::{ProgressBar, ProgressStyle};
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -258,137 +251,22 @@ fn eval(
     compare: &[String],
     name: &str,
 ) -> Result<ExitCode> {
-    let spec = spec_of(cfg)?;
-    let mut ds = open_dataset(dataset)?;
-    if !sequences.is_empty() {
-        ds.select(sequences)?;
-    }
-    let peers: Vec<(String, PathBuf)> = compare
-        .iter()
-        .map(|c| {
-            c.split_once('=')
-                .map(|(n, d)| (n.to_string(), PathBuf::from(d)))
-                .with_context(|| format!("--compare {c:?}: expected NAME=DIR"))
-        })
-        .collect::<Result<_>>()?;
-    for (n, d) in &peers {
-        if !d.is_dir() {
-            bail!("--compare {n}: {} is not a folder", d.display());
-        }
-    }
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let pool = pool(spec.config.threads)?;
-    let config_json = serde_json::to_value(&spec.config)?;
-    let mut summaries = Vec::new();
-    let mut truths = BTreeMap::new();
-    println!(
-        "bevt eval: {} sequences from {} ({} layout), {} thread(s)",
-        ds.sequences.len(),
-        ds.root.display(),
-        ds.layout,
-        spec.config.threads
-    );
-    for entry in &ds.sequences {
-        let bar = ProgressBar::new(0);
-        bar.set_style(
-            ProgressStyle::with_template("{prefix:>14} [{bar:40}] {pos}/{len} {msg}")
-                .unwrap_or_else(|_| ProgressStyle::default_bar())
-                .progress_chars("=> "),
-        );
-        bar.set_prefix(entry.name.clone());
-        let mut tracker = BevtTracker::new(spec.clone());
-        let run = pool.install(|| {
-            run_sequence(entry, &mut tracker, |_, o| {
-                bar.inc(1);
-                if let Some(o) = o {
-                    bar.set_message(format!("C={:.2}", o.consensus));
-                }
-            })
-        });
-        bar.finish_and_clear();
-        if let Err(e) = write_result_file(out, &run) {
-            eprintln!("warning: cannot write the result of {}: {e}", run.name);
-        }
-        let s = summarize_run(&run);
-        println!(
-            "{:>14}: {} frames, P@20 {:.3}, AUC {:.3}, {:.1} fps{}",
-            s.name,
-            s.frames_tracked,
-            s.precision_20,
-            s.auc,
-            s.fps,
-            s.error
-                .as_deref()
-                .map_or(String::new(), |e| format!("  FAILED: {e}"))
-        );
-        truths.insert(run.name.clone(), run.truth.clone());
-        summaries.push(s);
-        // Keep a summary on disk after every sequence: nothing computed is lost.
-        let partial = build_summary(name, &ds, &summaries, &truths, &peers, config_json.clone());
-        write_summary(out, &partial)
-            .with_context(|| format!("cannot write {}/summary.json", out.display()))?;
-    }
-    let summary = build_summary(name, &ds, &summaries, &truths, &peers, config_json);
-    write_summary(out, &summary)?;
-    println!("\n{}", console_table(&summary));
-    if plots {
-        let mut prec = vec![Curve {
-            name: name.to_string(),
-            score: summary.overall.precision_20,
-            values: summary.overall.precision_curve.clone(),
-            own: true,
-        }];
-        let mut succ = vec![Curve {
-            name: name.to_string(),
-            score: summary.overall.auc,
-            values: summary.overall.success_curve.clone(),
-            own: true,
-        }];
-        for p in &summary.compare {
-            prec.push(Curve {
-                name: p.name.clone(),
-                score: p.overall.precision_20,
-                values: p.overall.precision_curve.clone(),
-                own: false,
-            });
-            succ.push(Curve {
-                name: p.name.clone(),
-                score: p.overall.auc,
-                values: p.overall.success_curve.clone(),
-                own: false,
-            });
-        }
-        let n = summary.overall.sequences;
-        plot_curves(
-            &out.join("precision.png"),
-            &format!("Precision plots of OPE ({n} sequences)"),
-            "Location error threshold (px)",
-            "Precision",
-            50.0,
-            &prec,
-        )
-        .map_err(anyhow::Error::msg)?;
-        plot_curves(
-            &out.join("success.png"),
-            &format!("Success plots of OPE ({n} sequences)"),
-            "Overlap threshold",
-            "Success rate",
-            1.0,
-            &succ,
-        )
-        .map_err(anyhow::Error::msg)?;
-        println!(
-            "plots: {}, {}",
-            out.join("precision.png").display(),
-            out.join("success.png").display()
-        );
-    }
-    println!("results: {}", out.display());
-    Ok(if summary.overall.failed > 0 {
-        ExitCode::from(2)
-    } else {
-        ExitCode::SUCCESS
-    })
+    let opts = EvalOptions {
+        tracker: spec_of(cfg)?,
+        dataset: dataset.to_path_buf(),
+        out: out.to_path_buf(),
+        sequences: sequences.to_vec(),
+        plots,
+        compare: compare
+            .iter()
+            .map(|c| parse_compare(c).map_err(|e| anyhow::anyhow!("--compare {e}")))
+            .collect::<Result<_>>()?,
+        name: name.to_string(),
+        progress: true,
+    };
+    Ok(ExitCode::from(
+        bevt_node::tool::eval::eval(&opts)?.exit_code(),
+    ))
 }
 
 /// `--init x,y,w,h`: one finite box with positive size. Every bad box (unparsable, NaN,
