@@ -5,7 +5,7 @@
 //! on the row's centre line (plotters' own legend box drifts away from its labels when it
 //! holds dozens of entries). Our curve is red, thick and drawn last (on top); peers cycle
 //! through nine colours and, after each cycle, a new dash pattern, so that every entry of a
-//! 30-tracker comparison is told apart.
+//! 30-tracker comparison is told apart, and keep their style from one plot to the other.
 
 use plotters::coord::CoordTranslate;
 use plotters::element::DashedPathElement;
@@ -119,27 +119,22 @@ fn by_score(curves: &[Curve]) -> Vec<usize> {
     order
 }
 
-/// The style of each curve, in the order of `curves`: ours red and thick; peers, by
-/// decreasing score, cycle through the other nine colours, with a new dash pattern per cycle.
+/// The style of each curve, in the order of `curves`: ours red and thick; peers, in the
+/// order given (so a tracker keeps its style in the precision and the success plot), cycle
+/// through the other nine colours, with a new dash pattern per cycle.
 pub fn series_styles(curves: &[Curve]) -> Vec<SeriesStyle> {
-    let mut styles = vec![
-        SeriesStyle {
-            color: (0, 0, 0),
-            stroke: PEER_STROKE,
-            dash: Dash::Solid,
-        };
-        curves.len()
-    ];
     let mut peer = 0usize;
-    for i in by_score(curves) {
-        styles[i] = if curves[i].own {
-            let RGBColor(r, g, b) = PALETTE[0];
-            SeriesStyle {
-                color: (r, g, b),
-                stroke: OWN_STROKE,
-                dash: Dash::Solid,
+    curves
+        .iter()
+        .map(|c| {
+            if c.own {
+                let RGBColor(r, g, b) = PALETTE[0];
+                return SeriesStyle {
+                    color: (r, g, b),
+                    stroke: OWN_STROKE,
+                    dash: Dash::Solid,
+                };
             }
-        } else {
             let colours = PALETTE.len() - 1;
             let RGBColor(r, g, b) = PALETTE[1 + peer % colours];
             let dash =
@@ -150,9 +145,8 @@ pub fn series_styles(curves: &[Curve]) -> Vec<SeriesStyle> {
                 stroke: PEER_STROKE,
                 dash,
             }
-        };
-    }
-    styles
+        })
+        .collect()
 }
 
 /// One legend row as drawn.
@@ -335,6 +329,10 @@ mod tests {
         }
         assert_eq!(legend.entries[1].style.color, (214, 39, 40));
         assert_eq!(legend.entries[1].style.stroke, OWN_STROKE);
+        // A tracker keeps its style when its rank changes (precision vs success plot).
+        let mut reranked = curves.clone();
+        reranked[0].score = 0.95;
+        assert_eq!(series_styles(&reranked), styles);
         // Peers that share a colour differ in dash pattern.
         let peers: Vec<SeriesStyle> = styles
             .iter()
