@@ -27,7 +27,11 @@ use std::time::Instant;
 #[command(
     name = "bevt",
     version,
-    about = "BEVT visual object tracker: evaluation and tracking tools"
+    about = "BEVT visual object tracker: offline evaluation, tracking and replay tools",
+    after_help = "Run `bevt <COMMAND> --help` for a command's options. Boxes are `x,y,w,h` in \
+                  pixels: top-left corner, width, height. Exit codes: 0 success; 1 error (bad \
+                  value, unreadable input); 2 malformed command line or, for eval and track, \
+                  a sequence or frame that failed (the partial result is kept)."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -42,65 +46,85 @@ struct ConfigArgs {
     /// Override a configuration key, e.g. `--set admm.penalty=none` (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
-    /// Worker threads for one frame's scales (sets `threads`).
-    #[arg(long)]
+    /// Worker threads for one frame's scales (sets the configuration's `threads`; default 1).
+    #[arg(long, value_name = "N")]
     threads: Option<usize>,
 }
 
 #[derive(Subcommand)]
 enum Cmd {
     /// Track a synthetic sequence generated in memory and score it against its exact truth.
+    ///
+    /// No files, camera or ROS needed: a textured target moves and grows over a moving
+    /// background. Every N-th frame prints the tracked box, the true box (x y w h, pixels,
+    /// 0-based), the centre error and the tracker's consensus; the end prints precision at
+    /// 20 px, success AUC and the tracking speed.
     Demo {
         #[command(flatten)]
         cfg: ConfigArgs,
-        /// Number of frames.
-        #[arg(long, default_value_t = 150)]
+        /// Number of frames to generate (2 to 100000).
+        #[arg(long, value_name = "N", default_value_t = 150)]
         frames: usize,
-        /// Frame width, pixels.
-        #[arg(long, default_value_t = 640)]
+        /// Frame width, pixels (64 to 4096).
+        #[arg(long, value_name = "PX", default_value_t = 640)]
         width: usize,
-        /// Frame height, pixels.
-        #[arg(long, default_value_t = 360)]
+        /// Frame height, pixels (64 to 4096).
+        #[arg(long, value_name = "PX", default_value_t = 360)]
         height: usize,
-        /// Print every N-th frame.
-        #[arg(long, default_value_t = 15)]
+        /// Print a line every N frames (frames are numbered from 1; the last is always printed).
+        #[arg(long, value_name = "N", default_value_t = 15)]
         every: usize,
     },
-    /// One-pass evaluation on a dataset (UAV123 manifest, UAV123 download or OTB layout).
+    /// One-pass evaluation on a dataset: precision, success AUC and speed per sequence,
+    /// optionally compared with other trackers' results and plotted.
+    ///
+    /// Each sequence is tracked once from its first annotated box, without re-initialisation
+    /// (OPE, as in UAV123/OTB). Written to --out: `<sequence>.txt` (one `x,y,w,h` box per
+    /// frame, 1-based like the annotations), `summary.json` (updated after every sequence),
+    /// and with --plots `precision.png` and `success.png`. Exit code 2 when a sequence failed
+    /// (unreadable frame or annotation): the others are still scored.
     Eval {
         #[command(flatten)]
         cfg: ConfigArgs,
-        /// Dataset root.
-        #[arg(long)]
+        /// Dataset root: a folder with `sequences.json` (manifest), a UAV123 download
+        /// (`anno/` and `data_seq/`), or OTB-style `<sequence>/img/` +
+        /// `<sequence>/groundtruth_rect.txt`.
+        #[arg(long, value_name = "DIR")]
         dataset: PathBuf,
-        /// Output folder for result files, summary.json and plots.
-        #[arg(long)]
+        /// Output folder (created if missing) for result files, summary.json and plots.
+        #[arg(long, value_name = "DIR")]
         out: PathBuf,
         /// Comma-separated sequence names (default: all).
-        #[arg(long, value_delimiter = ',')]
+        #[arg(long, value_name = "NAMES", value_delimiter = ',')]
         sequences: Vec<String>,
-        /// Write precision and success plots (PNG).
+        /// Write precision.png and success.png (curves of every tracker, legend by score).
         #[arg(long)]
         plots: bool,
-        /// Compare with another tracker's result folder, `NAME=DIR` (repeatable).
+        /// Compare with another tracker: NAME=DIR, DIR holding its `<sequence>.txt` boxes
+        /// (one `x,y,w,h` row per frame, 1-based like the annotations). Repeatable.
         #[arg(long, value_name = "NAME=DIR")]
         compare: Vec<String>,
         /// Name of this run in tables and plots.
         #[arg(long, default_value = "BEVT-rs")]
         name: String,
     },
-    /// Track through a folder of frames from an initial box.
+    /// Track a target through a folder of frames from an initial box, one box per frame.
+    ///
+    /// Boxes in and out are in the UAV123/OTB annotation convention: `x,y,w,h` in pixels,
+    /// top-left corner 1-based (the image's top-left pixel is 1,1). Exit code 2 when a frame
+    /// cannot be read or tracked: the boxes before it are still written.
     Track {
         #[command(flatten)]
         cfg: ConfigArgs,
-        /// Folder of frames (jpg/png, sorted by name).
-        #[arg(long)]
+        /// Folder of frames (jpg, jpeg, png or bmp), tracked in file-name order.
+        #[arg(long, value_name = "DIR")]
         images: PathBuf,
-        /// Initial box `x,y,w,h` on the first frame, 1-based like annotation files.
-        #[arg(long)]
+        /// Initial box on the first frame: `x,y,w,h`, pixels, 1-based (e.g. `120,80,40,30`).
+        #[arg(long, value_name = "X,Y,W,H")]
         init: String,
-        /// Result file (one `x,y,w,h` row per frame); default: standard output.
-        #[arg(long)]
+        /// Result file: one `x,y,w,h` row per frame, 1-based like --init (the first row is
+        /// the initial box); default: standard output.
+        #[arg(long, value_name = "FILE")]
         out: Option<PathBuf>,
     },
     /// Replay a recorded camera topic (rosbag2 directory, .mcap or .db3) through the node
@@ -219,10 +243,10 @@ fn demo(
         preds.push(b);
         truth.push(Some(f.truth));
         if let Some(o) = out {
-            if t % every.max(1) == 0 || t + 1 == seq.frames {
+            if (t + 1) % every.max(1) == 0 || t + 1 == seq.frames {
                 println!(
-                    "frame {t:4}  box {:7.1} {:7.1} {:6.1} {:6.1}  truth {:7.1} {:7.1} {:6.1} {:6.1}  error {:5.2} px  consensus {:.3}  {}",
-                    b.x, b.y, b.w, b.h, f.truth.x, f.truth.y, f.truth.w, f.truth.h,
+                    "frame {:4}  box {:7.1} {:7.1} {:6.1} {:6.1}  truth {:7.1} {:7.1} {:6.1} {:6.1}  error {:5.2} px  consensus {:.3}  {}",
+                    t + 1, b.x, b.y, b.w, b.h, f.truth.x, f.truth.y, f.truth.w, f.truth.h,
                     b.center().distance(&f.truth.center()),
                     o.consensus,
                     if o.learned { "learned" } else { "skipped" }
