@@ -475,6 +475,7 @@ fn replay(a: &ReplayArgs) -> Result<ExitCode> {
 }
 
 fn main() -> ExitCode {
+    bevt_node::tool::pipe::exit_quietly_on_broken_pipe();
     match run(Cli::parse()) {
         Ok(c) => c,
         Err(e) => {
