@@ -245,6 +245,8 @@ pub fn plot_curves(
     let mut chart = ChartBuilder::on(&chart_area)
         .caption(title, ("sans-serif", 26))
         .margin(16)
+        // Room for the last x tick label, which would be clipped at the legend's edge.
+        .margin_right(28)
         .x_label_area_size(48)
         .y_label_area_size(60)
         .build_cartesian_2d(0.0..x_max, 0.0..1.0)
@@ -309,10 +311,10 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("bevt_plot_{}", std::process::id()));
         std::fs::create_dir_all(&dir)?;
         let p = dir.join("success.png");
-        // Ours is neither first given nor first by score; 34 entries need two columns.
+        // Ours is neither first given nor first by score; 37 entries need two columns.
         let mut curves = vec![curve("peer-b", 0.4, false), curve("ours", 0.7, true)];
         curves.push(curve("peer-a", 0.9, false));
-        for i in 0..31 {
+        for i in 0..34 {
             curves.push(curve(&format!("p{i}"), 0.3 - i as f64 * 0.005, false));
         }
         let legend = plot_curves(&p, "Success plot", "overlap", "success rate", 1.0, &curves)?;
@@ -345,6 +347,8 @@ mod tests {
                 assert!((a.color, a.dash) != (b.color, b.dash), "{a:?}");
             }
         }
+        let columns: std::collections::BTreeSet<i32> = legend.entries.iter().map(|e| e.x).collect();
+        assert_eq!(columns.len(), 2);
         let img = image::open(&p)?.to_rgb8();
         assert_eq!(img.height(), SIZE.1);
         assert_eq!(img.width(), legend.image_width);
