@@ -242,7 +242,7 @@ fn demo(launch: Launch, stop: Arc<AtomicBool>) -> Result<()> {
                 Some(_) if !was_visible => {
                     demo_row(t, state, None, "target out of view (scripted)")
                 }
-                Some(_) => demo_row(t, state, None, "target lost"),
+                Some(_) => demo_row(t, state, None, "target in view, not re-acquired yet"),
                 None => demo_row(t, state, None, "waiting for the first box"),
             };
             println!("{line}");
