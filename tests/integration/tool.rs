@@ -1,13 +1,14 @@
-//! The evaluation pipeline on a small dataset written by the test: results, summary,
-//! failure isolation and partial results.
+//! `bevt eval` (the same function the command line calls) on a small dataset written by the
+//! test: results, summary, failure isolation, partial results, progress, plots, exit codes.
 
 use bevt_core::eval::synth::SynthParams;
-use bevt_core::{BevtTracker, TrackerConfig};
+use bevt_core::TrackerConfig;
 use bevt_node::tool::dataset::{open_dataset, parse_annotation};
-use bevt_node::tool::report::{build_summary, summarize_run, write_result_file, write_summary};
-use bevt_node::tool::runner::run_sequence;
+use bevt_node::tool::eval::{
+    eval, parse_compare, plot_series, EvalOptions, SequenceProgress, EXIT_SEQUENCE_FAILED,
+};
+use bevt_node::tool::plots::plot_curves;
 use bevt_tests::temp_dir;
-use std::collections::BTreeMap;
 use std::path::Path;
 
 /// Writes a manifest dataset with three sequences: `good`, `corrupt` (frame 4 is not an
@@ -59,34 +60,55 @@ fn write_dataset(root: &Path) {
     .unwrap();
 }
 
+fn options(root: &Path, out: &Path, sequences: &[&str]) -> EvalOptions {
+    EvalOptions {
+        tracker: TrackerConfig::default().validate().unwrap(),
+        dataset: root.to_path_buf(),
+        out: out.to_path_buf(),
+        sequences: sequences.iter().map(|s| s.to_string()).collect(),
+        plots: false,
+        compare: Vec::new(),
+        name: "BEVT-rs".into(),
+        progress: false,
+    }
+}
+
 #[test]
 fn failures_are_isolated_reported_and_partial_results_kept() {
     let root = temp_dir("ds");
     write_dataset(&root);
+    assert_eq!(open_dataset(&root).unwrap().layout, "manifest");
+
+    // `bevt eval --sequences good`: exit code 0, one progress bar of its 8 frames.
+    let first = temp_dir("out_good");
+    let r = eval(&options(&root, &first, &["good"])).unwrap();
+    assert_eq!(r.exit_code(), 0);
+    assert!(r.plots.is_empty());
+    let bar = |name: &str, position: u64, length: u64| SequenceProgress {
+        name: name.into(),
+        position,
+        length,
+    };
+    assert_eq!(r.progress, [bar("good", 8, 8)]);
+
+    // Everything, compared with the first run's folder under another name, with plots.
     let out = temp_dir("out");
-    let ds = open_dataset(&root).unwrap();
-    assert_eq!(ds.layout, "manifest");
-    let spec = TrackerConfig::default().validate().unwrap();
-    let mut summaries = Vec::new();
-    let mut truths = BTreeMap::new();
-    for e in &ds.sequences {
-        let mut t = BevtTracker::new(spec.clone());
-        let run = run_sequence(e, &mut t, |_, _| {});
-        write_result_file(&out, &run).unwrap();
-        truths.insert(run.name.clone(), run.truth.clone());
-        summaries.push(summarize_run(&run));
-    }
-    // Compare against our own result folder under another name: identical scores.
-    let peers = vec![("self".to_string(), out.clone())];
-    let s = build_summary(
-        "BEVT-rs",
-        &ds,
-        &summaries,
-        &truths,
-        &peers,
-        serde_json::Value::Null,
+    let mut o = options(&root, &out, &[]);
+    o.plots = true;
+    o.compare = vec![parse_compare(&format!("self={}", first.display())).unwrap()];
+    let r = eval(&o).unwrap();
+    assert_eq!(r.exit_code(), EXIT_SEQUENCE_FAILED);
+    // Each bar is as long as its sequence; the corrupt one stopped at its 5th frame and the
+    // unreadable one never started.
+    assert_eq!(
+        r.progress,
+        [
+            bar("good", 8, 8),
+            bar("corrupt", 4, 8),
+            bar("badanno", 0, 0)
+        ]
     );
-    write_summary(&out, &s).unwrap();
+    let s = &r.summary;
 
     let by = |n: &str| s.sequences.iter().find(|x| x.name == n).unwrap();
     assert_eq!(by("good").status, "ok");
@@ -114,8 +136,11 @@ fn failures_are_isolated_reported_and_partial_results_kept() {
     let anno = std::fs::read_to_string(root.join("anno/good.txt")).unwrap();
     let a = parse_annotation(&anno, Path::new("a")).unwrap();
     let g = parse_annotation(&good, Path::new("g")).unwrap();
-    let first = (a[0].unwrap(), g[0].unwrap());
-    assert!((first.0.x - first.1.x).abs() < 0.01 && (first.0.y - first.1.y).abs() < 0.01);
+    let first_box = (a[0].unwrap(), g[0].unwrap());
+    assert!(
+        (first_box.0.x - first_box.1.x).abs() < 0.01
+            && (first_box.0.y - first_box.1.y).abs() < 0.01
+    );
     let partial = std::fs::read_to_string(out.join("corrupt.txt")).unwrap();
     assert_eq!(partial.lines().count(), 4);
 
@@ -124,9 +149,41 @@ fn failures_are_isolated_reported_and_partial_results_kept() {
     assert_eq!(s.attributes.len(), 1);
     assert_eq!(s.attributes[0].attribute, "SV");
 
+    // Both plots, each with a legend row per tracker in the image.
+    assert_eq!(
+        r.plots,
+        [out.join("precision.png"), out.join("success.png")]
+    );
+    for p in &r.plots {
+        let img = image::open(p).unwrap();
+        assert!(img.width() > img.height(), "{}", p.display());
+    }
+    let legend = plot_curves(
+        &out.join("check.png"),
+        "t",
+        "x",
+        "y",
+        1.0,
+        &plot_series("BEVT-rs", s, true),
+    )
+    .unwrap();
+    let names: Vec<&str> = legend.entries.iter().map(|e| e.label.as_str()).collect();
+    assert_eq!(names.len(), 2, "{names:?}");
+    assert!(
+        names.iter().any(|n| n.starts_with("BEVT-rs [")),
+        "{names:?}"
+    );
+    assert!(names.iter().any(|n| n.starts_with("self [")), "{names:?}");
+
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(json["overall"]["failed"], 2);
+
+    // Usage errors are errors (exit code 1 in `bevt`), not failed sequences.
+    assert!(parse_compare("no-equals-sign").is_err());
+    assert!(parse_compare(&format!("x={}", root.join("missing").display())).is_err());
+    assert!(eval(&options(&root, &out, &["nosuchsequence"])).is_err());
     let _ = std::fs::remove_dir_all(&root);
     let _ = std::fs::remove_dir_all(&out);
+    let _ = std::fs::remove_dir_all(&first);
 }

@@ -11,21 +11,14 @@ use bevt_core::eval::synth::SynthParams;
 use bevt_core::{BBox, BevtTracker, Frame, PixelFormat, Tracker};
 use bevt_node::node::node_params::launch_from_args;
 use bevt_node::params::load_config;
-use bevt_node::tool::dataset::{
-    format_annotation_row, image_files, open_dataset, parse_annotation,
-};
-use bevt_node::tool::plots::{plot_curves, Curve};
+use bevt_node::tool::dataset::{format_annotation_row, image_files, parse_annotation};
+use bevt_node::tool::eval::{parse_compare, EvalOptions};
 use bevt_node::tool::replay::{
     decode_only, parse_box as parse_replay_box, parse_reinit_file, parse_time_ns, InitAt,
     ReplayOptions, ReplaySummary,
 };
-use bevt_node::tool::report::{
-    build_summary, console_table, summarize_run, write_result_file, write_summary,
-};
-use bevt_node::tool::runner::{decode_ahead, run_sequence, track_feed};
+use bevt_node::tool::runner::{decode_ahead, track_feed};
 use clap::{Args, Parser, Subcommand};
-use indicatif::{ProgressBar, ProgressStyle};
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -34,7 +27,11 @@ use std::time::Instant;
 #[command(
     name = "bevt",
     version,
-    about = "BEVT visual object tracker: evaluation and tracking tools"
+    about = "BEVT visual object tracker: offline evaluation, tracking and replay tools",
+    after_help = "Run `bevt <COMMAND> --help` for a command's options. Boxes are `x,y,w,h` in \
+                  pixels: top-left corner, width, height. Exit codes: 0 success; 1 error (bad \
+                  value, unreadable input); 2 malformed command line or, for eval and track, \
+                  a sequence or frame that failed (the partial result is kept)."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -49,65 +46,85 @@ struct ConfigArgs {
     /// Override a configuration key, e.g. `--set admm.penalty=none` (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
-    /// Worker threads for one frame's scales (sets `threads`).
-    #[arg(long)]
+    /// Worker threads for one frame's scales (sets the configuration's `threads`; default 1).
+    #[arg(long, value_name = "N")]
     threads: Option<usize>,
 }
 
 #[derive(Subcommand)]
 enum Cmd {
     /// Track a synthetic sequence generated in memory and score it against its exact truth.
+    ///
+    /// No files, camera or ROS needed: a textured target moves and grows over a moving
+    /// background. Every N-th frame prints the tracked box, the true box (x y w h, pixels,
+    /// 0-based), the centre error and the tracker's consensus; the end prints precision at
+    /// 20 px, success AUC and the tracking speed.
     Demo {
         #[command(flatten)]
         cfg: ConfigArgs,
-        /// Number of frames.
-        #[arg(long, default_value_t = 150)]
+        /// Number of frames to generate (2 to 100000).
+        #[arg(long, value_name = "N", default_value_t = 150)]
         frames: usize,
-        /// Frame width, pixels.
-        #[arg(long, default_value_t = 640)]
+        /// Frame width, pixels (64 to 4096).
+        #[arg(long, value_name = "PX", default_value_t = 640)]
         width: usize,
-        /// Frame height, pixels.
-        #[arg(long, default_value_t = 360)]
+        /// Frame height, pixels (64 to 4096).
+        #[arg(long, value_name = "PX", default_value_t = 360)]
         height: usize,
-        /// Print every N-th frame.
-        #[arg(long, default_value_t = 15)]
+        /// Print a line every N frames (frames are numbered from 1; the last is always printed).
+        #[arg(long, value_name = "N", default_value_t = 15)]
         every: usize,
     },
-    /// One-pass evaluation on a dataset (UAV123 manifest, UAV123 download or OTB layout).
+    /// One-pass evaluation on a dataset: precision, success AUC and speed per sequence,
+    /// optionally compared with other trackers' results and plotted.
+    ///
+    /// Each sequence is tracked once from its first annotated box, without re-initialisation
+    /// (OPE, as in UAV123/OTB). Written to --out: `<sequence>.txt` (one `x,y,w,h` box per
+    /// frame, 1-based like the annotations), `summary.json` (updated after every sequence),
+    /// and with --plots `precision.png` and `success.png`. Exit code 2 when a sequence failed
+    /// (unreadable frame or annotation): the others are still scored.
     Eval {
         #[command(flatten)]
         cfg: ConfigArgs,
-        /// Dataset root.
-        #[arg(long)]
+        /// Dataset root: a folder with `sequences.json` (manifest), a UAV123 download
+        /// (`anno/` and `data_seq/`), or OTB-style `<sequence>/img/` +
+        /// `<sequence>/groundtruth_rect.txt`.
+        #[arg(long, value_name = "DIR")]
         dataset: PathBuf,
-        /// Output folder for result files, summary.json and plots.
-        #[arg(long)]
+        /// Output folder (created if missing) for result files, summary.json and plots.
+        #[arg(long, value_name = "DIR")]
         out: PathBuf,
         /// Comma-separated sequence names (default: all).
-        #[arg(long, value_delimiter = ',')]
+        #[arg(long, value_name = "NAMES", value_delimiter = ',')]
         sequences: Vec<String>,
-        /// Write precision and success plots (PNG).
+        /// Write precision.png and success.png (curves of every tracker, legend by score).
         #[arg(long)]
         plots: bool,
-        /// Compare with another tracker's result folder, `NAME=DIR` (repeatable).
+        /// Compare with another tracker: NAME=DIR, DIR holding its `<sequence>.txt` boxes
+        /// (one `x,y,w,h` row per frame, 1-based like the annotations). Repeatable.
         #[arg(long, value_name = "NAME=DIR")]
         compare: Vec<String>,
         /// Name of this run in tables and plots.
         #[arg(long, default_value = "BEVT-rs")]
         name: String,
     },
-    /// Track through a folder of frames from an initial box.
+    /// Track a target through a folder of frames from an initial box, one box per frame.
+    ///
+    /// Boxes in and out are in the UAV123/OTB annotation convention: `x,y,w,h` in pixels,
+    /// top-left corner 1-based (the image's top-left pixel is 1,1). Exit code 2 when a frame
+    /// cannot be read or tracked: the boxes before it are still written.
     Track {
         #[command(flatten)]
         cfg: ConfigArgs,
-        /// Folder of frames (jpg/png, sorted by name).
-        #[arg(long)]
+        /// Folder of frames (jpg, jpeg, png or bmp), tracked in file-name order.
+        #[arg(long, value_name = "DIR")]
         images: PathBuf,
-        /// Initial box `x,y,w,h` on the first frame, 1-based like annotation files.
-        #[arg(long)]
+        /// Initial box on the first frame: `x,y,w,h`, pixels, 1-based (e.g. `120,80,40,30`).
+        #[arg(long, value_name = "X,Y,W,H")]
         init: String,
-        /// Result file (one `x,y,w,h` row per frame); default: standard output.
-        #[arg(long)]
+        /// Result file: one `x,y,w,h` row per frame, 1-based like --init (the first row is
+        /// the initial box); default: standard output.
+        #[arg(long, value_name = "FILE")]
         out: Option<PathBuf>,
     },
     /// Replay a recorded camera topic (rosbag2 directory, .mcap or .db3) through the node
@@ -226,10 +243,10 @@ fn demo(
         preds.push(b);
         truth.push(Some(f.truth));
         if let Some(o) = out {
-            if t % every.max(1) == 0 || t + 1 == seq.frames {
+            if (t + 1) % every.max(1) == 0 || t + 1 == seq.frames {
                 println!(
-                    "frame {t:4}  box {:7.1} {:7.1} {:6.1} {:6.1}  truth {:7.1} {:7.1} {:6.1} {:6.1}  error {:5.2} px  consensus {:.3}  {}",
-                    b.x, b.y, b.w, b.h, f.truth.x, f.truth.y, f.truth.w, f.truth.h,
+                    "frame {:4}  box {:7.1} {:7.1} {:6.1} {:6.1}  truth {:7.1} {:7.1} {:6.1} {:6.1}  error {:5.2} px  consensus {:.3}  {}",
+                    t + 1, b.x, b.y, b.w, b.h, f.truth.x, f.truth.y, f.truth.w, f.truth.h,
                     b.center().distance(&f.truth.center()),
                     o.consensus,
                     if o.learned { "learned" } else { "skipped" }
@@ -258,137 +275,22 @@ fn eval(
     compare: &[String],
     name: &str,
 ) -> Result<ExitCode> {
-    let spec = spec_of(cfg)?;
-    let mut ds = open_dataset(dataset)?;
-    if !sequences.is_empty() {
-        ds.select(sequences)?;
-    }
-    let peers: Vec<(String, PathBuf)> = compare
-        .iter()
-        .map(|c| {
-            c.split_once('=')
-                .map(|(n, d)| (n.to_string(), PathBuf::from(d)))
-                .with_context(|| format!("--compare {c:?}: expected NAME=DIR"))
-        })
-        .collect::<Result<_>>()?;
-    for (n, d) in &peers {
-        if !d.is_dir() {
-            bail!("--compare {n}: {} is not a folder", d.display());
-        }
-    }
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let pool = pool(spec.config.threads)?;
-    let config_json = serde_json::to_value(&spec.config)?;
-    let mut summaries = Vec::new();
-    let mut truths = BTreeMap::new();
-    println!(
-        "bevt eval: {} sequences from {} ({} layout), {} thread(s)",
-        ds.sequences.len(),
-        ds.root.display(),
-        ds.layout,
-        spec.config.threads
-    );
-    for entry in &ds.sequences {
-        let bar = ProgressBar::new(0);
-        bar.set_style(
-            ProgressStyle::with_template("{prefix:>14} [{bar:40}] {pos}/{len} {msg}")
-                .unwrap_or_else(|_| ProgressStyle::default_bar())
-                .progress_chars("=> "),
-        );
-        bar.set_prefix(entry.name.clone());
-        let mut tracker = BevtTracker::new(spec.clone());
-        let run = pool.install(|| {
-            run_sequence(entry, &mut tracker, |_, o| {
-                bar.inc(1);
-                if let Some(o) = o {
-                    bar.set_message(format!("C={:.2}", o.consensus));
-                }
-            })
-        });
-        bar.finish_and_clear();
-        if let Err(e) = write_result_file(out, &run) {
-            eprintln!("warning: cannot write the result of {}: {e}", run.name);
-        }
-        let s = summarize_run(&run);
-        println!(
-            "{:>14}: {} frames, P@20 {:.3}, AUC {:.3}, {:.1} fps{}",
-            s.name,
-            s.frames_tracked,
-            s.precision_20,
-            s.auc,
-            s.fps,
-            s.error
-                .as_deref()
-                .map_or(String::new(), |e| format!("  FAILED: {e}"))
-        );
-        truths.insert(run.name.clone(), run.truth.clone());
-        summaries.push(s);
-        // Keep a summary on disk after every sequence: nothing computed is lost.
-        let partial = build_summary(name, &ds, &summaries, &truths, &peers, config_json.clone());
-        write_summary(out, &partial)
-            .with_context(|| format!("cannot write {}/summary.json", out.display()))?;
-    }
-    let summary = build_summary(name, &ds, &summaries, &truths, &peers, config_json);
-    write_summary(out, &summary)?;
-    println!("\n{}", console_table(&summary));
-    if plots {
-        let mut prec = vec![Curve {
-            name: name.to_string(),
-            score: summary.overall.precision_20,
-            values: summary.overall.precision_curve.clone(),
-            own: true,
-        }];
-        let mut succ = vec![Curve {
-            name: name.to_string(),
-            score: summary.overall.auc,
-            values: summary.overall.success_curve.clone(),
-            own: true,
-        }];
-        for p in &summary.compare {
-            prec.push(Curve {
-                name: p.name.clone(),
-                score: p.overall.precision_20,
-                values: p.overall.precision_curve.clone(),
-                own: false,
-            });
-            succ.push(Curve {
-                name: p.name.clone(),
-                score: p.overall.auc,
-                values: p.overall.success_curve.clone(),
-                own: false,
-            });
-        }
-        let n = summary.overall.sequences;
-        plot_curves(
-            &out.join("precision.png"),
-            &format!("Precision plots of OPE ({n} sequences)"),
-            "Location error threshold (px)",
-            "Precision",
-            50.0,
-            &prec,
-        )
-        .map_err(anyhow::Error::msg)?;
-        plot_curves(
-            &out.join("success.png"),
-            &format!("Success plots of OPE ({n} sequences)"),
-            "Overlap threshold",
-            "Success rate",
-            1.0,
-            &succ,
-        )
-        .map_err(anyhow::Error::msg)?;
-        println!(
-            "plots: {}, {}",
-            out.join("precision.png").display(),
-            out.join("success.png").display()
-        );
-    }
-    println!("results: {}", out.display());
-    Ok(if summary.overall.failed > 0 {
-        ExitCode::from(2)
-    } else {
-        ExitCode::SUCCESS
-    })
+    let opts = EvalOptions {
+        tracker: spec_of(cfg)?,
+        dataset: dataset.to_path_buf(),
+        out: out.to_path_buf(),
+        sequences: sequences.to_vec(),
+        plots,
+        compare: compare
+            .iter()
+            .map(|c| parse_compare(c).map_err(|e| anyhow::anyhow!("--compare {e}")))
+            .collect::<Result<_>>()?,
+        name: name.to_string(),
+        progress: true,
+    };
+    Ok(ExitCode::from(
+        bevt_node::tool::eval::eval(&opts)?.exit_code(),
+    ))
 }
 
 /// `--init x,y,w,h`: one finite box with positive size. Every bad box (unparsable, NaN,
@@ -573,6 +475,7 @@ fn replay(a: &ReplayArgs) -> Result<ExitCode> {
 }
 
 fn main() -> ExitCode {
+    bevt_node::tool::pipe::exit_quietly_on_broken_pipe();
     match run(Cli::parse()) {
         Ok(c) => c,
         Err(e) => {

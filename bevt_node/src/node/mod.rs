@@ -1,7 +1,9 @@
 //! The live ROS 2 tracking node: decisions in [`app`], DDS in [`ros`], start-up arguments in
-//! [`node_params`], and the synthetic camera and ground station its tests talk to in [`sim`].
+//! [`node_params`], its console log lines in [`console`], and the synthetic camera and ground
+//! station its tests talk to in [`sim`].
 
 pub mod app;
+pub mod console;
 pub mod node_params;
 pub mod param_services;
 pub mod ros;

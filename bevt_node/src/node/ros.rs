@@ -508,7 +508,15 @@ struct Worker<'a> {
 impl Worker<'_> {
     fn log(&self, level: ros2_client::log::LogLevel, text: &str) {
         ros2_client::rosout!(self.ep.node, level, "{}", text);
-        eprintln!("[{:?}] [{}]: {text}", level, self.settings.node_name);
+        eprintln!(
+            "{}",
+            crate::node::console::line(
+                level,
+                std::time::SystemTime::now(),
+                &self.settings.node_name,
+                text
+            )
+        );
     }
 
     fn publish(&self, o: &FrameOutputs) {

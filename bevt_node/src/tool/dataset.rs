@@ -25,12 +25,13 @@ use thiserror::Error;
 #[non_exhaustive]
 pub enum DatasetError {
     /// A file or directory could not be read.
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}: {error}")]
     Io {
         /// The path.
         path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The I/O error, already in the message (not a `source()`, so that an error chain
+        /// such as `bevt`'s `error: ...` does not print it twice).
+        error: std::io::Error,
     },
     /// `sequences.json` is malformed.
     #[error("malformed manifest {path}: {reason}")]
@@ -169,7 +170,7 @@ impl SequenceEntry {
     pub fn load(&self) -> Result<Sequence, DatasetError> {
         let text = std::fs::read_to_string(&self.anno).map_err(|e| DatasetError::Io {
             path: self.anno.clone(),
-            source: e,
+            error: e,
         })?;
         let truth = parse_annotation(&text, &self.anno)?;
         let frames = match &self.frames {
@@ -217,7 +218,7 @@ impl SequenceEntry {
 fn list_images(dir: &Path) -> Result<Vec<PathBuf>, DatasetError> {
     let rd = std::fs::read_dir(dir).map_err(|e| DatasetError::Io {
         path: dir.to_path_buf(),
-        source: e,
+        error: e,
     })?;
     let mut files: Vec<PathBuf> = rd
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -387,7 +388,7 @@ pub fn open_dataset(root: &Path) -> Result<Dataset, DatasetError> {
 fn open_manifest(root: &Path, path: &Path) -> Result<Dataset, DatasetError> {
     let text = std::fs::read_to_string(path).map_err(|e| DatasetError::Io {
         path: path.to_path_buf(),
-        source: e,
+        error: e,
     })?;
     let m: Manifest = serde_json::from_str(&text).map_err(|e| DatasetError::Manifest {
         path: path.to_path_buf(),
@@ -478,7 +479,7 @@ fn open_uav123(root: &Path, set: &str, anno_dir: &Path) -> Result<Dataset, Datas
     let mut names: Vec<String> = std::fs::read_dir(anno_dir)
         .map_err(|e| DatasetError::Io {
             path: anno_dir.to_path_buf(),
-            source: e,
+            error: e,
         })?
         .filter_map(|e| e.ok())
         .filter_map(|e| {
@@ -527,7 +528,7 @@ fn open_uav123(root: &Path, set: &str, anno_dir: &Path) -> Result<Dataset, Datas
 fn open_otb(root: &Path) -> Result<Dataset, DatasetError> {
     let rd = std::fs::read_dir(root).map_err(|e| DatasetError::Io {
         path: root.to_path_buf(),
-        source: e,
+        error: e,
     })?;
     let mut sequences: Vec<SequenceEntry> = rd
         .filter_map(|e| e.ok())
@@ -558,6 +559,21 @@ fn open_otb(root: &Path) -> Result<Dataset, DatasetError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_unreadable_dataset_is_explained_once() {
+        let e = open_dataset(Path::new("/nonexistent/bevt/dataset")).unwrap_err();
+        let chain = format!("{:#}", anyhow::Error::from(e));
+        assert_eq!(
+            chain.matches("No such file or directory").count(),
+            1,
+            "{chain}"
+        );
+        assert!(
+            chain.starts_with("cannot read /nonexistent/bevt/dataset"),
+            "{chain}"
+        );
+    }
 
     #[test]
     fn annotation_rows_convert_to_zero_based_and_nan_is_absent() {

@@ -1,10 +1,13 @@
 //! The offline `bevt` tool: dataset readers ([`dataset`]), the evaluation runner
-//! ([`runner`]), result files and tables ([`report`]), plots ([`plots`]), and the replay of
-//! recorded flights ([`bag`] reads rosbag2 recordings, [`replay`] runs the node logic over
-//! them and writes MCAP for Foxglove).
+//! ([`runner`]) and `bevt eval` itself ([`eval`]), result files and tables ([`report`]),
+//! plots ([`plots`]), and the replay of recorded flights ([`bag`] reads rosbag2 recordings,
+//! [`replay`] runs the node logic over them and writes MCAP for Foxglove); [`pipe`] keeps
+//! `bevt ... | head` quiet.
 
 pub mod bag;
 pub mod dataset;
+pub mod eval;
+pub mod pipe;
 pub mod plots;
 pub mod replay;
 pub mod report;

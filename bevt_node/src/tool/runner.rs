@@ -4,7 +4,7 @@
 //! Failures (an unreadable frame, a tracker error) end the run early with the reason;
 //! every box computed before that is kept.
 
-use crate::tool::dataset::{Sequence, SequenceEntry};
+use crate::tool::dataset::{DatasetError, Sequence, SequenceEntry};
 use bevt_core::{BBox, Frame, PixelFormat, TrackOutput, Tracker};
 use std::path::PathBuf;
 use std::sync::mpsc;
@@ -167,11 +167,23 @@ pub fn run_sequence(
     tracker: &mut dyn Tracker,
     on_frame: impl FnMut(usize, Option<&TrackOutput>),
 ) -> SequenceRun {
-    let seq: Sequence = match entry.load() {
+    run_loaded(&entry.name, entry.load(), tracker, on_frame)
+}
+
+/// [`run_sequence`] on a sequence already loaded with [`SequenceEntry::load`] (`name` is the
+/// entry's name, kept when loading failed): lets the caller size a progress bar from
+/// `Sequence::frames` first.
+pub fn run_loaded(
+    name: &str,
+    loaded: Result<Sequence, DatasetError>,
+    tracker: &mut dyn Tracker,
+    on_frame: impl FnMut(usize, Option<&TrackOutput>),
+) -> SequenceRun {
+    let seq: Sequence = match loaded {
         Ok(s) => s,
         Err(e) => {
             return SequenceRun {
-                name: entry.name.clone(),
+                name: name.to_string(),
                 truth: Vec::new(),
                 run: TrackRun {
                     error: Some(e.to_string()),
