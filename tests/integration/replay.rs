@@ -95,6 +95,7 @@ fn options(bag: &Path, topic: &str, out: &Path, init: BBox) -> ReplayOptions {
         csv: Some(out.join("out.csv")),
         reinit: Vec::new(),
         copy_images: false,
+        stop: None,
     }
 }
 
@@ -329,7 +330,7 @@ fn replay_ok(bag: &Path, topic: &str, name: &str) -> ReplaySummary {
 }
 
 #[test]
-fn bad_input_is_a_clear_error_or_a_counted_skip_and_results_are_kept() {
+fn bad_input_is_a_clear_error_or_a_counted_skip_and_results_are_kept_apart() {
     let Some(b) = bags() else { return };
     let mb = b.dir.join("mcap_bag");
     // Missing topic: the topics that exist are listed.
@@ -387,11 +388,21 @@ fn bad_input_is_a_clear_error_or_a_counted_skip_and_results_are_kept() {
     assert!(e.reason.contains("cut.mcap"), "{e}");
     let n = e.summary.frames as usize;
     assert!(n > 3 && n < FRAMES, "{n} frames before the cut");
-    assert_eq!(csv_rows(&out.join("out.csv")).len(), n);
+    // A failed run replaces no output: the frames before the cut are kept in its partial
+    // files, which are finished and readable.
+    assert!(!out.join("out.csv").exists() && !out.join("out.mcap").exists());
+    let partial = |ext: &str| {
+        e.partial
+            .iter()
+            .find(|p| p.extension().is_some_and(|x| x == ext))
+            .unwrap_or_else(|| panic!("no partial .{ext}: {:?}", e.partial))
+            .clone()
+    };
+    assert_eq!(csv_rows(&partial("csv")).len(), n);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("replay/read_mcap.py");
     let r = Command::new(&b.py)
         .arg(&script)
-        .arg(out.join("out.mcap"))
+        .arg(partial("mcap"))
         .output()
         .unwrap();
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));

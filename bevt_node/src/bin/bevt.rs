@@ -21,6 +21,8 @@ use bevt_node::tool::runner::{decode_ahead, track_feed};
 use clap::{Args, Parser, Subcommand};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::Instant;
 
 #[derive(Parser)]
@@ -145,7 +147,8 @@ struct ReplayArgs {
     /// Initial box `x,y,w,h`, image pixels from 0 (as the node's reinit service).
     #[arg(long)]
     init: String,
-    /// Apply the initial box on the N-th message of the topic (from 0; default 0).
+    /// Apply the initial box on the N-th message of the topic (from 1, as `bevt track`'s
+    /// frames; default 1).
     #[arg(long, value_name = "N", conflicts_with = "init_time")]
     init_frame: Option<u64>,
     /// Apply the initial box on the first frame stamped at or after T (seconds).
@@ -406,6 +409,16 @@ fn print_replay_summary(s: &ReplaySummary) {
     }
 }
 
+/// A flag set by SIGINT or SIGTERM (the `ctrlc` handler), for a run to finish its outputs
+/// and stop.
+fn stop_on_signal() -> Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let s = stop.clone();
+    ctrlc::set_handler(move || s.store(true, Ordering::Relaxed))
+        .context("cannot install the SIGINT/SIGTERM handler")?;
+    Ok(stop)
+}
+
 fn replay(a: &ReplayArgs) -> Result<ExitCode> {
     let launch = match &a.params_file {
         Some(p) => launch_from_args(
@@ -431,9 +444,21 @@ fn replay(a: &ReplayArgs) -> Result<ExitCode> {
         }
         return Ok(ExitCode::SUCCESS);
     }
+    // Before anything is read or written: no output may be an input or the other output.
+    let mut outputs = vec![("--out", a.out.as_path())];
+    if let Some(c) = &a.csv {
+        outputs.push(("--csv", c.as_path()));
+    }
+    let mut inputs = vec![a.bag.as_path()];
+    inputs.extend(a.reinit_file.as_deref());
+    inputs.extend(a.params_file.as_deref());
+    inputs.extend(a.cfg.config.as_deref());
+    bevt_node::tool::outputs::refuse_overwriting_inputs(&outputs, &inputs)
+        .map_err(anyhow::Error::msg)?;
     let init_at = match (&a.init_time, a.init_frame) {
         (Some(t), _) => InitAt::Time(parse_time_ns(t).map_err(anyhow::Error::msg)?),
-        (None, n) => InitAt::Frame(n.unwrap_or(0)),
+        (None, Some(0)) => bail!("--init-frame counts from 1 (the first message is 1)"),
+        (None, n) => InitAt::Frame(n.map_or(0, |n| n - 1)),
     };
     let reinit = match &a.reinit_file {
         Some(p) => {
@@ -454,18 +479,35 @@ fn replay(a: &ReplayArgs) -> Result<ExitCode> {
         csv: a.csv.clone(),
         reinit,
         copy_images: a.copy_images,
+        stop: Some(stop_on_signal()?),
     };
     let pool = pool(opts.tracker.config.threads)?;
     match pool.install(|| bevt_node::tool::replay::replay(&opts, true)) {
         Ok(s) => {
             print_replay_summary(&s);
-            println!("wrote {}", opts.out.display());
+            let csv = opts.csv.as_ref().map(|c| format!(" and {}", c.display()));
+            println!("wrote {}{}", opts.out.display(), csv.unwrap_or_default());
+            if s.interrupted {
+                eprintln!(
+                    "replay: interrupted by a signal after {} frames; the outputs are finished and hold them",
+                    s.frames
+                );
+                // The shell's code for a process ended by SIGINT.
+                return Ok(ExitCode::from(130));
+            }
             Ok(ExitCode::SUCCESS)
         }
         Err(e) => {
             print_replay_summary(&e.summary);
+            let kept = if e.partial.is_empty() {
+                "no output was written".to_string()
+            } else {
+                let files: Vec<String> =
+                    e.partial.iter().map(|p| p.display().to_string()).collect();
+                format!("the frames processed are kept in {}", files.join(" and "))
+            };
             eprintln!(
-                "error: {}\n(the output written so far is kept: {})",
+                "error: {}\n({kept}; {} is untouched)",
                 e.reason,
                 opts.out.display()
             );

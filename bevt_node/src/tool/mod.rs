@@ -2,11 +2,13 @@
 //! ([`runner`]) and `bevt eval` itself ([`eval`]), result files and tables ([`report`]),
 //! plots ([`plots`]), and the replay of recorded flights ([`bag`] reads rosbag2 recordings,
 //! [`replay`] runs the node logic over them and writes MCAP for Foxglove); [`pipe`] keeps
-//! `bevt ... | head` quiet.
+//! `bevt ... | head` quiet; [`outputs`] keeps every run from overwriting its inputs or an
+//! earlier good output.
 
 pub mod bag;
 pub mod dataset;
 pub mod eval;
+pub mod outputs;
 pub mod pipe;
 pub mod plots;
 pub mod replay;

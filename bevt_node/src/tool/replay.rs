@@ -12,8 +12,13 @@
 //! `/detections` (`vision_msgs/msg/Detection2DArray`), `/track_status`
 //! (`bevt_msgs/msg/TrackStatus`), `/track_annotations` (`foxglove_msgs/msg/ImageAnnotations`)
 //! and optionally the images themselves; and optionally a CSV (stamp, box, score, state per
-//! frame). Both are written as the replay goes and closed properly when it stops early, so
-//! what was computed is kept.
+//! frame). An output that is the same file as an input (the bag, any file of a bag
+//! directory) or as the other output is refused before anything is written. Both outputs
+//! are written beside their targets as `<stem>.partial-<pid>.<ext>` and renamed over the
+//! targets when the replay succeeds or is interrupted (SIGINT / SIGTERM through
+//! [`ReplayOptions::stop`]: the files are finished and hold the frames processed); a
+//! failed replay leaves earlier outputs untouched and keeps its partial files only when
+//! they hold tracked frames ([`ReplayError::partial`]).
 //!
 //! Frames that cannot be used are counted by reason, as the node reports them: an
 //! unsupported encoding, a step/size mismatch or an undecodable compressed image is an
@@ -24,6 +29,7 @@
 use crate::convert::{clip, reinit_request};
 use crate::node::app::{CameraMsg, FrameOutputs, NodeCore, NodeSettings};
 use crate::tool::bag::{open_bag, BagError, BagLimits, BagMessage};
+use crate::tool::outputs::{refuse_overwriting_inputs, Staged};
 use bevt_core::{BBox, TrackerSpec};
 use bevt_msgs::bevt::TrackStatus;
 use bevt_msgs::builtin_interfaces::Time;
@@ -37,6 +43,8 @@ use std::collections::{BTreeMap, VecDeque};
 use std::io::{BufWriter, Write};
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
@@ -97,7 +105,17 @@ pub struct ReplayOptions {
     pub reinit: Vec<ReinitEntry>,
     /// Also write the images to the output (under the input topic's name).
     pub copy_images: bool,
+    /// Set (by a SIGINT / SIGTERM handler) to stop after the current frame: the outputs are
+    /// finished with what was processed and the summary says `interrupted`.
+    pub stop: Option<Arc<AtomicBool>>,
 }
+
+/// Most distinct reasons kept in [`ReplaySummary::skipped`]; occurrences of further reasons
+/// are counted under [`OTHER_REASONS`] (a bag of millions of distinct bad frames must not
+/// hold millions of strings).
+pub const MAX_SKIP_REASONS: usize = 64;
+/// The key of [`ReplaySummary::skipped`] that counts reasons beyond [`MAX_SKIP_REASONS`].
+pub const OTHER_REASONS: &str = "(other reasons)";
 
 /// What a replay did.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
@@ -116,9 +134,11 @@ pub struct ReplaySummary {
     pub reinit_refused: Vec<String>,
     /// Wall time of the whole replay, s.
     pub seconds: f64,
+    /// Stopped by [`ReplayOptions::stop`] before the end of the topic.
+    pub interrupted: bool,
 }
 
-/// A replay that stopped early; what it wrote before is closed and kept.
+/// A replay that failed: the targets are untouched (earlier outputs stay as they were).
 #[derive(Debug, Error)]
 #[error("{reason}")]
 pub struct ReplayError {
@@ -126,6 +146,9 @@ pub struct ReplayError {
     pub reason: String,
     /// What it did until then.
     pub summary: Box<ReplaySummary>,
+    /// The partial outputs kept (finished files holding the frames processed) when the
+    /// track had started; empty otherwise.
+    pub partial: Vec<PathBuf>,
 }
 
 /// Parses a time given in seconds (`1700000000.123456789`, at most 9 decimals) exactly
@@ -345,9 +368,11 @@ struct McapOut {
 }
 
 impl McapOut {
-    fn create(path: &Path, copy_images: Option<String>) -> Result<Self, String> {
-        let file = std::fs::File::create(path)
-            .map_err(|e| format!("cannot create {}: {e}", path.display()))?;
+    fn create(
+        file: std::fs::File,
+        path: &Path,
+        copy_images: Option<String>,
+    ) -> Result<Self, String> {
         let e = |e: mcap::McapError| format!("{}: {e}", path.display());
         let mut writer = mcap::WriteOptions::new()
             .profile("ros2")
@@ -460,6 +485,16 @@ fn csv_row(o: &FrameOutputs) -> String {
     }
 }
 
+/// Counts one occurrence of `reason`, keeping at most [`MAX_SKIP_REASONS`] distinct ones.
+fn count_reason(skipped: &mut BTreeMap<String, u64>, reason: String) {
+    let key = if skipped.contains_key(&reason) || skipped.len() < MAX_SKIP_REASONS {
+        reason
+    } else {
+        OTHER_REASONS.to_string()
+    };
+    *skipped.entry(key).or_insert(0) += 1;
+}
+
 /// The replay loop's state.
 struct Run<'a> {
     opts: &'a ReplayOptions,
@@ -482,7 +517,7 @@ struct Run<'a> {
 
 impl Run<'_> {
     fn skip(&mut self, reason: String) {
-        *self.summary.skipped.entry(reason).or_insert(0) += 1;
+        count_reason(&mut self.summary.skipped, reason);
     }
 
     /// The bag-clock instant of `ns` for the node's rate limit.
@@ -543,6 +578,15 @@ impl Run<'_> {
     }
 
     fn on_message(&mut self, index: u64, m: &BagMessage<'_>) -> ControlFlow<()> {
+        if self
+            .opts
+            .stop
+            .as_ref()
+            .is_some_and(|s| s.load(Ordering::Relaxed))
+        {
+            self.summary.interrupted = true;
+            return ControlFlow::Break(());
+        }
         self.summary.messages += 1;
         self.progress.inc(1);
         let view = match decode_view(m.msg_type, m.data) {
@@ -647,36 +691,69 @@ fn progress_bar(total: Option<u64>) -> indicatif::ProgressBar {
 /// # Errors
 /// [`ReplayError`] when the bag cannot be read (missing topic, corrupt or truncated file),
 /// the topic is empty or not an image topic, the initial box is refused, no frame could be
-/// used, or an output cannot be written. The outputs written until then are closed and
-/// kept; the error carries the summary so far.
+/// used, an output cannot be written, or an output is the same file as an input or as the
+/// other output. The targets are then untouched; the error carries the summary so far and
+/// the partial outputs kept.
 pub fn replay(opts: &ReplayOptions, show_progress: bool) -> Result<ReplaySummary, ReplayError> {
     let started = Instant::now();
     let fail = |reason: String, summary: ReplaySummary| ReplayError {
         reason,
         summary: Box::new(summary),
+        partial: Vec::new(),
     };
+    let mut outputs = vec![("--out", opts.out.as_path())];
+    if let Some(c) = &opts.csv {
+        outputs.push(("--csv", c.as_path()));
+    }
+    refuse_overwriting_inputs(&outputs, &[opts.bag.as_path()])
+        .map_err(|e| fail(e, ReplaySummary::default()))?;
     let bag = open_bag(&opts.bag, BagLimits::default())
         .map_err(|e| fail(e.to_string(), ReplaySummary::default()))?;
     let info = bag
         .check_topic(&opts.topic)
         .map_err(|e| fail(e.to_string(), ReplaySummary::default()))?;
     let total = info.and_then(|t| t.count);
+    // Both outputs are staged beside their targets; nothing existing is opened for writing.
+    let (mcap_file, mcap_staged) = match Staged::create(&opts.out) {
+        Ok((s, f)) => (f, s),
+        Err(e) => return Err(fail(e, ReplaySummary::default())),
+    };
+    let mut staged = vec![mcap_staged];
+    let abandon_all = |staged: Vec<Staged>| {
+        for s in staged {
+            s.abandon(false);
+        }
+    };
     let csv = match &opts.csv {
         None => None,
         Some(p) => {
-            let mut w = std::fs::File::create(p).map(BufWriter::new).map_err(|e| {
-                fail(
-                    format!("cannot create {}: {e}", p.display()),
-                    ReplaySummary::default(),
-                )
-            })?;
-            writeln!(w, "stamp,x,y,w,h,score,state")
-                .map_err(|e| fail(format!("writing the CSV: {e}"), ReplaySummary::default()))?;
-            Some(w)
+            let header = Staged::create(p).and_then(|(s, f)| {
+                staged.push(s);
+                let mut w = BufWriter::new(f);
+                writeln!(w, "stamp,x,y,w,h,score,state")
+                    .map_err(|e| format!("writing the CSV: {e}"))?;
+                Ok(w)
+            });
+            match header {
+                Ok(w) => Some(w),
+                Err(e) => {
+                    abandon_all(staged);
+                    return Err(fail(e, ReplaySummary::default()));
+                }
+            }
         }
     };
-    let mcap = McapOut::create(&opts.out, opts.copy_images.then(|| opts.topic.clone()))
-        .map_err(|e| fail(e, ReplaySummary::default()))?;
+    let mcap = match McapOut::create(
+        mcap_file,
+        &opts.out,
+        opts.copy_images.then(|| opts.topic.clone()),
+    ) {
+        Ok(m) => m,
+        Err(e) => {
+            abandon_all(staged);
+            return Err(fail(e, ReplaySummary::default()));
+        }
+    };
     let progress = if show_progress && total.is_none_or(|n| n > 100) {
         progress_bar(total)
     } else {
@@ -706,6 +783,7 @@ pub fn replay(opts: &ReplayOptions, show_progress: bool) -> Result<ReplaySummary
     });
     run.progress.finish_and_clear();
     let closed = run.close();
+    let closed_ok = closed.is_ok();
     run.summary.seconds = started.elapsed().as_secs_f64();
     let summary = std::mem::take(&mut run.summary);
     let reason = match read {
@@ -735,9 +813,27 @@ pub fn replay(opts: &ReplayOptions, show_progress: bool) -> Result<ReplaySummary
         )),
         Ok(_) => closed.err(),
     };
+    drop(run);
     match reason {
-        Some(r) => Err(fail(r, summary)),
-        None => Ok(summary),
+        Some(r) => {
+            // The targets stay as they were; the partial files are kept when they hold
+            // tracked frames (finished and readable), removed otherwise.
+            let keep = summary.reinit_applied > 0 && closed_ok;
+            let partial = staged.into_iter().filter_map(|s| s.abandon(keep)).collect();
+            Err(ReplayError {
+                reason: r,
+                summary: Box::new(summary),
+                partial,
+            })
+        }
+        None => {
+            for s in staged {
+                if let Err(e) = s.commit() {
+                    return Err(fail(e, summary));
+                }
+            }
+            Ok(summary)
+        }
     }
 }
 
@@ -775,6 +871,7 @@ pub fn decode_only(
     let fail = |e: BagError| ReplayError {
         reason: e.to_string(),
         summary: Box::default(),
+        partial: Vec::new(),
     };
     let bag = open_bag(bag, BagLimits::default()).map_err(fail)?;
     let mut summary = ReplaySummary::default();
@@ -785,7 +882,7 @@ pub fn decode_only(
         summary.messages += 1;
         match decode_message(&m, &mut buf, &limits) {
             Ok(_) => decoded += 1,
-            Err(e) => *summary.skipped.entry(e).or_insert(0) += 1,
+            Err(e) => count_reason(&mut summary.skipped, e),
         }
         ControlFlow::Continue(())
     })
@@ -798,6 +895,18 @@ pub fn decode_only(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn distinct_skip_reasons_are_capped_and_the_rest_counted() {
+        let mut m = BTreeMap::new();
+        for i in 0..10 * MAX_SKIP_REASONS {
+            count_reason(&mut m, format!("bad frame {i}"));
+            count_reason(&mut m, "bad frame 0".into());
+        }
+        assert_eq!(m.len(), MAX_SKIP_REASONS + 1);
+        assert_eq!(m["bad frame 0"], 10 * MAX_SKIP_REASONS as u64 + 1);
+        assert_eq!(m[OTHER_REASONS], 9 * MAX_SKIP_REASONS as u64);
+    }
 
     #[test]
     fn times_parse_exactly_and_bad_ones_are_named() {
