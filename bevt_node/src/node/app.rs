@@ -107,6 +107,15 @@ impl ReinitGate {
         }
     }
 
+    /// A new rate and depth for a running gate: the tokens already spent stay spent (a
+    /// live change must not refill the bucket, or changing it would lift the limit).
+    pub fn retune(&mut self, rate_hz: f64, burst: u32) {
+        let fresh = Self::new(rate_hz, burst);
+        self.rate_hz = fresh.rate_hz;
+        self.burst = fresh.burst;
+        self.tokens = self.tokens.min(self.burst);
+    }
+
     /// Takes a token at `now`.
     ///
     /// # Errors
@@ -322,12 +331,12 @@ impl NodeCore {
     /// Takes the settings that may change while running ([`crate::node::param_services`]
     /// says which): `class_id`, `reinit_max_fast_forward`, `reinit_rate_hz`,
     /// `reinit_burst`, `stale_timeout`. The others (buffer, image limits, name) keep their
-    /// start-up values. A new rate or burst starts a full bucket.
+    /// start-up values. A new rate or burst keeps the tokens already spent.
     pub fn set_live_settings(&mut self, s: &NodeSettings) {
         if s.reinit_rate_hz != self.settings.reinit_rate_hz
             || s.reinit_burst != self.settings.reinit_burst
         {
-            self.gate = ReinitGate::new(s.reinit_rate_hz, s.reinit_burst);
+            self.gate.retune(s.reinit_rate_hz, s.reinit_burst);
         }
         self.settings.class_id.clone_from(&s.class_id);
         self.settings.reinit_max_fast_forward = s.reinit_max_fast_forward;
@@ -1096,6 +1105,30 @@ mod tests {
         );
         let b = crate::convert::bbox_from_detection(&out.unwrap().detections.detections[0]);
         assert!(b.center().distance(&seq.truth(29).center()) < 5.0);
+    }
+
+    #[test]
+    fn a_live_rate_change_does_not_refill_the_bucket() {
+        let mut n = core();
+        let t = Instant::now();
+        while n.admit_reinit(t).is_ok() {}
+        // The same limits set again, and a larger burst: still empty at the same instant.
+        let mut s = n.settings.clone();
+        n.set_live_settings(&s);
+        assert!(
+            n.admit_reinit(t).is_err(),
+            "the same settings refilled the bucket"
+        );
+        s.reinit_burst += 10;
+        s.reinit_rate_hz *= 2.0;
+        n.set_live_settings(&s);
+        assert!(
+            n.admit_reinit(t).is_err(),
+            "a new burst refilled the bucket"
+        );
+        // The new rate applies: 1 s at 2 Hz earns two requests.
+        let t1 = t + Duration::from_secs(1);
+        assert_eq!((0..10).filter(|_| n.admit_reinit(t1).is_ok()).count(), 2);
     }
 
     #[test]

@@ -28,10 +28,54 @@ pub fn line(level: LogLevel, at: SystemTime, node: &str, text: &str) -> String {
     )
 }
 
+/// Longest text of one log line, characters: longer text is clipped (a request can carry a
+/// 100,000-character parameter name).
+pub const MAX_LOG_CHARS: usize = 2048;
+/// Longest name (a parameter's, a topic's) quoted in a message, characters.
+pub const MAX_NAME_CHARS: usize = 96;
+
+/// `text` made safe to log: control characters escaped (a newline in a name must not forge
+/// a log line of its own), clipped to `max` characters with the number left out.
+pub fn printable(text: &str, max: usize) -> String {
+    let mut out = String::new();
+    let mut shown = 0usize;
+    let mut chars = text.chars();
+    for c in chars.by_ref() {
+        if shown == max {
+            let rest = 1 + chars.count();
+            out.push_str(&format!("... ({rest} more characters)"));
+            return out;
+        }
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+        shown += 1;
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use std::time::Duration;
+
+    #[test]
+    fn logged_text_cannot_forge_lines_or_flood_the_log() {
+        let forged = "x\n[INFO] [0.0] [bevt_node]: forged\r\u{1b}[2J";
+        let p = printable(forged, 100);
+        assert!(
+            !p.contains('\n') && !p.contains('\r') && !p.contains('\u{1b}'),
+            "{p}"
+        );
+        assert!(p.starts_with("x\\n[INFO]"), "{p}");
+        let long = "a".repeat(120_072);
+        let p = printable(&long, MAX_NAME_CHARS);
+        assert_eq!(p, format!("{}... (119976 more characters)", "a".repeat(96)));
+        assert_eq!(printable("exactly", 7), "exactly");
+        assert_eq!(printable("äöü", 2), "äö... (1 more characters)");
+    }
 
     #[test]
     fn lines_read_like_ros2_console_output() {

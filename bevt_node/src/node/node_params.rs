@@ -128,7 +128,8 @@ fn int_in(name: &str, v: &Value, (lo, hi): (u64, u64)) -> Result<u64, LaunchErro
 
 fn param_err(name: &str, reason: impl Into<String>) -> LaunchError {
     LaunchError::Param {
-        name: name.to_string(),
+        // The name may come from a request: clipped and escaped before it is echoed.
+        name: crate::node::console::printable(name, crate::node::console::MAX_NAME_CHARS),
         reason: reason.into(),
     }
 }
@@ -451,6 +452,12 @@ fn apply_param(
             if !(lo..=hi).contains(&(c.chars().count() as u64)) {
                 return Err(param_err(k, format!("expected {lo}..={hi} characters")));
             }
+            if c.chars().any(char::is_control) {
+                return Err(param_err(
+                    k,
+                    "control characters (newlines, escapes) are not allowed",
+                ));
+            }
             node.class_id = c.to_string();
         }
         name if name.starts_with("tracker.") => {
@@ -555,6 +562,32 @@ mod tests {
 
     fn args(s: &str) -> Vec<String> {
         s.split_whitespace().map(String::from).collect()
+    }
+
+    #[test]
+    fn hostile_names_and_class_ids_are_clipped_escaped_or_refused() {
+        let args = |p: &str| vec!["--ros-args".to_string(), "-p".to_string(), p.to_string()];
+        let long = format!("{}:=1", "n".repeat(120_000));
+        let e = launch_from_args(&args(&long), |_| None)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.len() < 400, "{} characters echoed", e.len());
+        assert!(
+            e.contains("more characters") && e.contains("unknown parameter"),
+            "{e}"
+        );
+        let e = launch_from_args(&args("bad\nname:=1"), |_| None)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(!e.contains('\n'), "{e}");
+        // A double-quoted YAML value carries a real newline (as a set_parameters string does).
+        let e = launch_from_args(&args("class_id:=\"a\\n[INFO] forged\""), |_| None)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("control characters"), "{e}");
     }
 
     #[test]

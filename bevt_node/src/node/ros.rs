@@ -195,6 +195,21 @@ pub fn context(settings: &RosSettings) -> Result<Context, RosError> {
             reason: "no network interfaces: list the addresses to listen on (0.0.0.0 = all)".into(),
         });
     }
+    // An address the host does not have would fail deep in RustDDS as "Could not find free
+    // ParticipantId": name the address and the parameter instead.
+    for a in &settings.networks {
+        if a.is_unspecified() {
+            continue;
+        }
+        if let Err(e) = std::net::UdpSocket::bind((*a, 0)) {
+            return Err(RosError::Create {
+                what: format!("DDS participant on domain {}", settings.domain_id),
+                reason: format!(
+                    "network_interfaces: {a} is not an address of this host ({e}); list this host's addresses, or 0.0.0.0 for all"
+                ),
+            });
+        }
+    }
     // Discovery samples are small: RustDDS's built-in limits stay.
     #[cfg_attr(not(feature = "security"), allow(unused_mut))]
     let mut b = DomainParticipantBuilder::new(settings.domain_id)
@@ -507,6 +522,7 @@ struct Worker<'a> {
 
 impl Worker<'_> {
     fn log(&self, level: ros2_client::log::LogLevel, text: &str) {
+        let text = &crate::node::console::printable(text, crate::node::console::MAX_LOG_CHARS);
         ros2_client::rosout!(self.ep.node, level, "{}", text);
         eprintln!(
             "{}",
@@ -747,6 +763,19 @@ pub fn run(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_interface_address_the_host_lacks_is_named_with_its_parameter() {
+        // 192.0.2.1 is TEST-NET-1 (RFC 5737): never an address of this host. Binding to it
+        // fails locally; no packet is sent.
+        let s = RosSettings {
+            networks: vec![IpAddr::from([192, 0, 2, 1])],
+            ..RosSettings::default()
+        };
+        let e = context(&s).err().expect("refused").to_string();
+        assert!(e.contains("network_interfaces: 192.0.2.1"), "{e}");
+        assert!(!e.contains("ParticipantId"), "{e}");
+    }
 
     #[test]
     fn names_resolve_remaps_and_namespaces() {

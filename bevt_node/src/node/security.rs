@@ -109,7 +109,7 @@ impl DdsSecurity {
         match self {
             Self::Enclave(_) => None,
             Self::Off { why } => Some(format!(
-                "WARNING: DDS Security is off ({why}): the node is unauthenticated; any participant on domain {domain_id} can call reinit/stop, publish on init and read the tracks (see README, \"Secured mode\")"
+                "WARNING: DDS Security is off ({why}): the node is unauthenticated; any participant on domain {domain_id} can call reinit/stop, publish on init, read the tracks and list, read and set the node's parameters through the ROS parameter services (see docs/security.md)"
             )),
         }
     }
@@ -394,6 +394,7 @@ mod tests {
     fn the_unsecured_warning_says_what_is_exposed() {
         let w = DdsSecurity::default().warning(7).unwrap();
         assert!(w.contains("unauthenticated") && w.contains("domain 7") && w.contains("reinit"));
+        assert!(w.contains("parameter services"), "{w}");
         assert_eq!(DdsSecurity::Enclave("/x".into()).warning(7), None);
     }
 }
