@@ -38,9 +38,8 @@ pub const MAX_NAME_CHARS: usize = 96;
 /// a log line of its own), clipped to `max` characters with the number left out.
 pub fn printable(text: &str, max: usize) -> String {
     let mut out = String::new();
-    let mut shown = 0usize;
     let mut chars = text.chars();
-    for c in chars.by_ref() {
+    for (shown, c) in chars.by_ref().enumerate() {
         if shown == max {
             let rest = 1 + chars.count();
             out.push_str(&format!("... ({rest} more characters)"));
@@ -51,7 +50,6 @@ pub fn printable(text: &str, max: usize) -> String {
         } else {
             out.push(c);
         }
-        shown += 1;
     }
     out
 }
