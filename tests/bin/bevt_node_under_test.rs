@@ -26,6 +26,30 @@ fn main() -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
+    bevt_node::node::console::exit_on_any_panic("bevt_node_under_test");
+    // Fault injection for the supervision tests (never set by the node itself).
+    match std::env::var("BEVT_TEST_FAULT").as_deref() {
+        Ok("reception_ends") => ros::inject_fault(ros::InjectedFault::ReceptionEnds),
+        Ok("reception_panics") => ros::inject_fault(ros::InjectedFault::ReceptionPanics),
+        Ok("worker_panics") => ros::inject_fault(ros::InjectedFault::WorkerPanics),
+        Ok("other_thread_panics") => {
+            // A stand-in for a thread the node does not own (RustDDS's event loop): the
+            // process-wide hook catches a panic in any thread.
+            let _ = std::thread::Builder::new()
+                .name("dds-event-loop-stand-in".into())
+                .spawn(|| {
+                    std::thread::sleep(std::time::Duration::from_secs(2));
+                    let v: Vec<u8> = Vec::new();
+                    // Indexing past the end: a panic, as a defect in another thread would.
+                    std::hint::black_box(v[std::hint::black_box(3)])
+                });
+        }
+        Ok(other) => {
+            eprintln!("bevt_node_under_test: unknown BEVT_TEST_FAULT {other:?}");
+            return ExitCode::FAILURE;
+        }
+        Err(_) => {}
+    }
     let stop = Arc::new(AtomicBool::new(false));
     let s = stop.clone();
     let watcher = std::thread::Builder::new()

@@ -15,6 +15,7 @@ mod real_data;
 mod replay;
 mod ros_tools;
 mod security;
+mod supervision;
 mod synthetic;
 mod tool;
 mod verifier;

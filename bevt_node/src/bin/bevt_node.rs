@@ -286,6 +286,8 @@ fn run() -> Result<()> {
 }
 
 fn main() -> ExitCode {
+    // A dead thread must not leave a silent node: any panic ends the process non-zero.
+    bevt_node::node::console::exit_on_any_panic("bevt_node");
     match run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

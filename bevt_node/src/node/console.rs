@@ -28,6 +28,46 @@ pub fn line(level: LogLevel, at: SystemTime, node: &str, text: &str) -> String {
     )
 }
 
+/// The exit status of a node one of whose threads panicked (EX_SOFTWARE).
+pub const PANIC_EXIT_STATUS: i32 = 70;
+
+/// Makes a panic in any thread of the process fatal: after the default report (message,
+/// location, backtrace if enabled) it logs which thread died and exits with
+/// [`PANIC_EXIT_STATUS`], so that `ros2 launch` (respawn) or a service manager restarts the
+/// node instead of leaving it running with a dead thread (the reception, the worker, or
+/// RustDDS's discovery and event-loop threads). The node catches no panic anywhere, so a
+/// panic is always a defect. For the node's programs only: a test process would end at its
+/// first failed assertion.
+pub fn exit_on_any_panic(node: &'static str) {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        default(info);
+        let thread = std::thread::current();
+        let what = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        eprintln!(
+            "{}",
+            line(
+                LogLevel::Fatal,
+                SystemTime::now(),
+                node,
+                &printable(
+                    &format!(
+                        "thread '{}' died: {what}; exiting with status {PANIC_EXIT_STATUS} so that the node is restarted",
+                        thread.name().unwrap_or("unnamed")
+                    ),
+                    MAX_LOG_CHARS
+                )
+            )
+        );
+        std::process::exit(PANIC_EXIT_STATUS);
+    }));
+}
+
 /// Longest text of one log line, characters: longer text is clipped (a request can carry a
 /// 100,000-character parameter name).
 pub const MAX_LOG_CHARS: usize = 2048;

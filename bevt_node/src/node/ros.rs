@@ -105,6 +105,53 @@ pub enum RosError {
         /// DDS error.
         reason: String,
     },
+    /// A thread of the node ended while the node was running.
+    #[error("the {thread} thread ended unexpectedly: {reason}")]
+    ThreadEnded {
+        /// The thread's name.
+        thread: &'static str,
+        /// Why (its panic message, or that it returned).
+        reason: String,
+    },
+}
+
+/// Faults a test binary injects to check that no thread of the node dies silently. The
+/// node never sets one itself; nothing received from the network can.
+#[doc(hidden)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InjectedFault {
+    /// The reception thread returns as if its subscriptions had ended.
+    ReceptionEnds,
+    /// The reception thread panics.
+    ReceptionPanics,
+    /// The worker panics after its first tracked frame.
+    WorkerPanics,
+}
+
+static INJECTED_FAULT: std::sync::OnceLock<InjectedFault> = std::sync::OnceLock::new();
+
+/// Sets the fault of this process (tests only; see [`InjectedFault`]).
+#[doc(hidden)]
+pub fn inject_fault(fault: InjectedFault) {
+    let _ = INJECTED_FAULT.set(fault);
+}
+
+/// Panics with the injected fault's name (tests only).
+#[allow(clippy::panic)] // the point of an injected fault
+fn injected_panic(what: &str) -> ! {
+    panic!("injected fault: {what}")
+}
+
+/// Name of the reception thread.
+const RECEPTION_THREAD: &str = "bevt-dds-rx";
+
+/// The message of a thread's panic payload.
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "a panic without a message".into())
 }
 
 /// Settings of the ROS layer.
@@ -466,12 +513,17 @@ fn create_endpoints(settings: &RosSettings) -> Result<(Endpoints, CameraSubscrip
 fn spawn_reception(
     camera: CameraSubscriptions,
     shutdown: Arc<AtomicBool>,
-) -> Result<Arc<Slot>, RosError> {
+) -> Result<(Arc<Slot>, std::thread::JoinHandle<()>), RosError> {
     let slot = Arc::new(Slot::default());
     let rx_slot = slot.clone();
-    std::thread::Builder::new()
-        .name("bevt-dds-rx".into())
+    let handle = std::thread::Builder::new()
+        .name(RECEPTION_THREAD.into())
         .spawn(move || {
+            match INJECTED_FAULT.get() {
+                Some(InjectedFault::ReceptionEnds) => return,
+                Some(InjectedFault::ReceptionPanics) => injected_panic("the reception thread"),
+                _ => {}
+            }
             futures::executor::block_on(async move {
                 let raw = camera.raw.async_stream().map(|r| match r {
                     Ok((m, _)) => Incoming::Raw(m, Instant::now()),
@@ -496,7 +548,7 @@ fn spawn_reception(
             what: "reception thread".into(),
             reason: e.to_string(),
         })?;
-    Ok(slot)
+    Ok((slot, handle))
 }
 
 /// The worker loop's state: the node logic, its DDS endpoints, the admitted requests
@@ -729,7 +781,7 @@ pub fn run(
     let (ep, camera) = create_endpoints(settings)?;
     let debug_period =
         Duration::try_from_secs_f64(1.0 / settings.debug_image_rate_hz).unwrap_or(MAX_PERIOD);
-    let slot = spawn_reception(camera, shutdown.clone())?;
+    let (slot, reception) = spawn_reception(camera, shutdown.clone())?;
     let params = NodeParams::new(settings, core.settings(), &core.spec().config);
     let mut w = Worker {
         params,
@@ -749,10 +801,31 @@ pub fn run(
         ros2_client::log::LogLevel::Info,
         "started: waiting for images and an initial box",
     );
+    let mut tracked_any = false;
     while !shutdown.load(Ordering::Relaxed) {
+        // A reception thread that ended while running would leave a node that publishes
+        // nothing: stop with the reason, so the process exits non-zero and is restarted.
+        if reception.is_finished() && !shutdown.load(Ordering::Relaxed) {
+            let reason = match reception.join() {
+                Ok(()) => "it returned (its subscriptions ended)".to_string(),
+                Err(p) => format!("it panicked: {}", panic_message(p.as_ref())),
+            };
+            let e = RosError::ThreadEnded {
+                thread: RECEPTION_THREAD,
+                reason,
+            };
+            w.log(ros2_client::log::LogLevel::Fatal, &e.to_string());
+            return Err(e);
+        }
         w.read_requests();
         w.serve_params();
-        w.track_newest(&slot, &mut observe);
+        w.track_newest(&slot, &mut |o: &FrameOutputs| {
+            tracked_any = true;
+            observe(o)
+        });
+        if tracked_any && INJECTED_FAULT.get() == Some(&InjectedFault::WorkerPanics) {
+            injected_panic("the worker");
+        }
         w.serve_one_request(&mut observe);
         w.run_timers(Instant::now());
     }
