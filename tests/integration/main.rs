@@ -11,6 +11,7 @@ mod interop;
 mod lost;
 mod node;
 mod node_limits;
+mod param_flood;
 mod real_data;
 mod replay;
 mod ros_tools;

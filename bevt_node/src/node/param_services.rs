@@ -742,6 +742,49 @@ pub struct ParamServers {
 
 /// Most requests per service read per turn of the worker loop.
 const MAX_PARAM_REQUESTS_PER_TURN: usize = 100;
+/// Names (or parameters) answered per turn of the worker loop, over all parameter services,
+/// in multiples of the declared parameters: request work is budgeted so that a flood of
+/// requests never starves the camera (the rest waits for the next turn, 10 ms later).
+const NAME_BUDGET_PER_TURN_IN_DECLARED: usize = 4;
+/// History depth of the parameter services' request readers and reply writers: requests
+/// beyond it that no turn has read yet are dropped by DDS, and replies that the requester
+/// never reads do not pile up (a 1000-deep history of replies to 100,000-name requests held
+/// over a gigabyte).
+pub const PARAM_SERVICE_HISTORY_DEPTH: usize = 8;
+
+/// The QoS of the parameter services: reliable, keep last [`PARAM_SERVICE_HISTORY_DEPTH`].
+pub fn param_service_qos() -> ros2_client::QosProfile {
+    ros2_client::QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast {
+        depth: PARAM_SERVICE_HISTORY_DEPTH,
+    })
+}
+
+/// The request work left in one turn of the worker loop, and the names one request may
+/// carry.
+struct TurnBudget {
+    left: usize,
+    cap: usize,
+}
+
+impl TurnBudget {
+    /// Charges a request of `n` names to the budget; false (with a log line) when it names
+    /// more than the declared parameters and gets an empty reply.
+    fn admit(&mut self, service: &str, n: usize, log: &mut Vec<(bool, String)>) -> bool {
+        self.left = self.left.saturating_sub(n.clamp(1, self.cap));
+        if n > self.cap {
+            log.push((
+                false,
+                format!(
+                    "{service}: a request of {n} names refused (more than the {} declared parameters): empty reply",
+                    self.cap
+                ),
+            ));
+            false
+        } else {
+            true
+        }
+    }
+}
 
 impl ParamServers {
     /// Creates the services of the node `node` (fully qualified `fqn`, e.g. `/bevt_node`)
@@ -830,54 +873,94 @@ impl ParamServers {
         mut apply: impl FnMut(&Change) -> Result<(), String>,
     ) -> Vec<(bool, String)> {
         let mut log = Vec::new();
+        // No request may name more than the declared parameters: its reply would be an
+        // amplifier. Larger ones get an empty reply, logged.
+        let cap = params.declared().len().max(1);
+        let mut budget = TurnBudget {
+            left: cap * NAME_BUDGET_PER_TURN_IN_DECLARED,
+            cap,
+        };
         for _ in 0..MAX_PARAM_REQUESTS_PER_TURN {
+            if budget.left == 0 {
+                break;
+            }
             let Ok(Some((id, r))) = self.get.receive_request() else {
                 break;
             };
-            let _ = self.get.send_response(
-                id,
-                GetParametersResponse {
-                    values: params.get(&r.names),
-                },
-            );
+            let values = if budget.admit("get_parameters", r.names.len(), &mut log) {
+                params.get(&r.names)
+            } else {
+                Vec::new()
+            };
+            let _ = self.get.send_response(id, GetParametersResponse { values });
         }
         for _ in 0..MAX_PARAM_REQUESTS_PER_TURN {
+            if budget.left == 0 {
+                break;
+            }
             let Ok(Some((id, r))) = self.types.receive_request() else {
                 break;
             };
-            let _ = self.types.send_response(
-                id,
-                GetParameterTypesResponse {
-                    values: params.types(&r.names),
-                },
-            );
+            let values = if budget.admit("get_parameter_types", r.names.len(), &mut log) {
+                params.types(&r.names)
+            } else {
+                Vec::new()
+            };
+            let _ = self
+                .types
+                .send_response(id, GetParameterTypesResponse { values });
         }
         for _ in 0..MAX_PARAM_REQUESTS_PER_TURN {
+            if budget.left == 0 {
+                break;
+            }
             let Ok(Some((id, r))) = self.list.receive_request() else {
                 break;
             };
-            let _ = self.list.send_response(
-                id,
-                ListParametersResponse {
-                    result: params.list(&r.prefixes, r.depth),
-                },
-            );
+            let result = if budget.admit("list_parameters", r.prefixes.len(), &mut log) {
+                params.list(&r.prefixes, r.depth)
+            } else {
+                ListParametersResult {
+                    names: Vec::new(),
+                    prefixes: Vec::new(),
+                }
+            };
+            let _ = self
+                .list
+                .send_response(id, ListParametersResponse { result });
         }
         for _ in 0..MAX_PARAM_REQUESTS_PER_TURN {
+            if budget.left == 0 {
+                break;
+            }
             let Ok(Some((id, r))) = self.describe.receive_request() else {
                 break;
             };
-            let _ = self.describe.send_response(
-                id,
-                DescribeParametersResponse {
-                    values: params.describe(&r.names),
-                },
-            );
+            let values = if budget.admit("describe_parameters", r.names.len(), &mut log) {
+                params.describe(&r.names)
+            } else {
+                Vec::new()
+            };
+            let _ = self
+                .describe
+                .send_response(id, DescribeParametersResponse { values });
         }
         for _ in 0..MAX_PARAM_REQUESTS_PER_TURN {
+            if budget.left == 0 {
+                break;
+            }
             let Ok(Some((id, r))) = self.set.receive_request() else {
                 break;
             };
+            if !budget.admit("set_parameters", r.parameter.len(), &mut log) {
+                let _ = self.set.send_response(
+                    id,
+                    SetParametersResponse {
+                        results: Vec::new(),
+                    },
+                );
+                continue;
+            }
             let mut results = Vec::new();
             let mut changed = Vec::new();
             for p in r.parameter {
@@ -912,9 +995,24 @@ impl ParamServers {
                 .send_response(id, SetParametersResponse { results });
         }
         for _ in 0..MAX_PARAM_REQUESTS_PER_TURN {
+            if budget.left == 0 {
+                break;
+            }
             let Ok(Some((id, r))) = self.set_atomically.receive_request() else {
                 break;
             };
+            if !budget.admit("set_parameters_atomically", r.parameter.len(), &mut log) {
+                let _ = self.set_atomically.send_response(
+                    id,
+                    SetParametersAtomicallyResponse {
+                        result: raw::SetParametersResult {
+                            successful: false,
+                            reason: format!("more parameters than the {cap} declared"),
+                        },
+                    },
+                );
+                continue;
+            }
             // All checked first, in order, each against the values the earlier ones set
             // (on a copy), then all applied.
             let mut trial = params.clone();

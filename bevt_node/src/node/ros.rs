@@ -484,12 +484,17 @@ fn create_endpoints(settings: &RosSettings) -> Result<(Endpoints, CameraSubscrip
         settings.namespace.trim_end_matches('/'),
         settings.node_name
     );
-    let params = ParamServers::new(&ctx, &mut node, &fqn, settings.service_mapping, &sq).map_err(
-        |reason| RosError::Create {
-            what: "parameter services".into(),
-            reason,
-        },
-    )?;
+    let params = ParamServers::new(
+        &ctx,
+        &mut node,
+        &fqn,
+        settings.service_mapping,
+        &crate::node::param_services::param_service_qos(),
+    )
+    .map_err(|reason| RosError::Create {
+        what: "parameter services".into(),
+        reason,
+    })?;
     let endpoints = Endpoints {
         node,
         sub_init,

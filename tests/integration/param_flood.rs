@@ -1,0 +1,129 @@
+//! The parameter services are no memory amplifier: 20 `describe_parameters` requests of
+//! 100,000 names each, whose replies are never read, leave the node process's peak RSS
+//! within 2x its steady state and its boxes coming at the camera rate.
+
+use bevt_core::eval::synth::SynthParams;
+use bevt_msgs::builtin_interfaces::Time;
+use bevt_node::convert::reinit_request;
+use bevt_node::node::ros::{context, RosSettings};
+use bevt_node::node::sim::{spawn_camera, GroundStation};
+use ros2_client::rcl_interfaces::{DescribeParametersRequest, DescribeParametersResponse};
+use ros2_client::{Name, NodeName, NodeOptions, ServiceTypeName};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// (VmRSS, VmHWM) of a process, KiB.
+fn memory(pid: u32) -> (u64, u64) {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/status")).expect("status");
+    let field = |name: &str| -> u64 {
+        s.lines()
+            .find_map(|l| l.strip_prefix(name))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+            .expect("a memory field")
+    };
+    (field("VmRSS:"), field("VmHWM:"))
+}
+
+#[test]
+fn a_flood_of_huge_describe_requests_leaves_memory_and_boxes_alone() {
+    const REQUESTS: usize = 20;
+    const NAMES: usize = 100_000;
+    let domain = bevt_tests::dds_domain();
+    let settings = RosSettings {
+        domain_id: domain,
+        ..RosSettings::default()
+    };
+    let mut node = Command::new(env!("CARGO_BIN_EXE_bevt_node_under_test"))
+        .args(["--ros-args", "-p", &format!("domain_id:={domain}")])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start the node");
+    let pid = node.id();
+    let stop = Arc::new(AtomicBool::new(false));
+    let seq = SynthParams {
+        frames: 400,
+        ..SynthParams::default()
+    };
+    let (camera, truth) = spawn_camera(&settings, seq, 20.0, stop.clone()).expect("camera");
+    let gs = GroundStation::new(&settings).expect("ground station");
+    std::thread::sleep(Duration::from_secs(2));
+    let (stamp, b) = {
+        let log = truth.lock().expect("truth");
+        let (k, v) = log.iter().next_back().expect("frames published");
+        (*k, *v)
+    };
+    let r = gs
+        .reinit(
+            &reinit_request(b, Time::from_nanos(stamp), ""),
+            Duration::from_secs(5),
+        )
+        .expect("reinit answered");
+    assert!(r.success, "{}", r.message);
+    // Steady state: 3 s of tracking.
+    std::thread::sleep(Duration::from_secs(3));
+    let _ = gs.take_detections();
+    let (steady, _) = memory(pid);
+    // The flood: a client that never reads its replies.
+    let ctx = context(&settings).expect("context");
+    let mut client_node = ctx
+        .new_node(
+            NodeName::new("/", "flooder").expect("name"),
+            NodeOptions::new(),
+        )
+        .expect("node");
+    let client = client_node
+        .create_client::<DescribeParametersRequest, DescribeParametersResponse>(
+            settings.service_mapping,
+            &Name::new("/bevt_node", "describe_parameters").expect("name"),
+            &ServiceTypeName::new("rcl_interfaces", "DescribeParameters"),
+            bevt_node::node::ros::service_qos(),
+            bevt_node::node::ros::service_qos(),
+        )
+        .expect("client");
+    std::thread::sleep(Duration::from_secs(2));
+    let names: Vec<String> = (0..NAMES)
+        .map(|i| format!("tracker.no.such.key{i}"))
+        .collect();
+    for _ in 0..REQUESTS {
+        client
+            .send_request(DescribeParametersRequest {
+                names: names.clone(),
+            })
+            .expect("send");
+    }
+    // Boxes keep coming while the node digests the flood.
+    let start = Instant::now();
+    let (mut last_box, mut longest_gap, mut boxes) = (Instant::now(), Duration::ZERO, 0);
+    while start.elapsed() < Duration::from_secs(10) {
+        let d = gs.take_detections();
+        let now = Instant::now();
+        if d.iter().any(|a| !a.detections.is_empty()) {
+            boxes += d.len();
+            longest_gap = longest_gap.max(now - last_box);
+            last_box = now;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    longest_gap = longest_gap.max(Instant::now() - last_box);
+    let (rss, peak) = memory(pid);
+    println!(
+        "param flood: steady RSS {steady} KiB, after {rss} KiB, peak {peak} KiB; {boxes} boxes in 10 s, longest gap {longest_gap:?}"
+    );
+    stop.store(true, Ordering::Relaxed);
+    let _ = camera.join();
+    drop(node.stdin.take());
+    let _ = node.wait();
+    assert!(
+        peak <= 2 * steady,
+        "peak RSS {peak} KiB above twice the steady {steady} KiB"
+    );
+    assert!(
+        longest_gap <= Duration::from_secs(2),
+        "boxes stopped for {longest_gap:?}"
+    );
+    assert!(boxes >= 150, "{boxes} boxes in 10 s at 20 Hz");
+}
