@@ -10,7 +10,8 @@
 //!   one-pass evaluation ([`tool::runner`]), result files and tables ([`tool::report`]),
 //!   precision/success plots ([`tool::plots`]).
 //! - Shared by both: [`convert`] (ROS messages ↔ frames, boxes and detections) and
-//!   [`params`] (the tracker's YAML configuration and `key=value` overrides).
+//!   [`params`] (the tracker's YAML configuration and `key=value` overrides), both read
+//!   through [`yaml`] (size and nesting bounded before parsing).
 //!
 //! The binaries (`src/bin/`) are thin command-line layers: `bevt_node.rs` (the node),
 //! `bevt.rs` (the tool), `bevt_latency.rs` (the node's latency benchmark).
@@ -20,3 +21,4 @@ pub mod convert;
 pub mod node;
 pub mod params;
 pub mod tool;
+pub mod yaml;

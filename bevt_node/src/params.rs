@@ -42,9 +42,9 @@ pub fn load_config(path: Option<&Path>, overrides: &[String]) -> Result<TrackerS
     let (origin, text) = match path {
         Some(p) => (
             p.display().to_string(),
-            std::fs::read_to_string(p).map_err(|e| ParamsError::Io {
-                path: p.display().to_string(),
-                source: e,
+            crate::yaml::read_file(p).map_err(|reason| ParamsError::Parse {
+                origin: p.display().to_string(),
+                reason,
             })?,
         ),
         None => (
@@ -59,7 +59,7 @@ pub fn load_config(path: Option<&Path>, overrides: &[String]) -> Result<TrackerS
     let mut value: serde_norway::Value = if text.trim().is_empty() {
         serde_norway::Value::Mapping(Default::default())
     } else {
-        serde_norway::from_str(&text).map_err(|e| parse_err(&origin, &e))?
+        crate::yaml::parse(&text, &origin).map_err(|e| parse_err(&origin, &e))?
     };
     if let Some(dir) = path.and_then(Path::parent) {
         resolve_cnn_paths(&mut value, dir);
@@ -68,7 +68,7 @@ pub fn load_config(path: Option<&Path>, overrides: &[String]) -> Result<TrackerS
         let (key, raw) = o
             .split_once('=')
             .ok_or_else(|| parse_err(o, &"expected key.path=value"))?;
-        let v: serde_norway::Value = serde_norway::from_str(raw).map_err(|e| parse_err(o, &e))?;
+        let v: serde_norway::Value = crate::yaml::parse(raw, o).map_err(|e| parse_err(o, &e))?;
         let mut node = &mut value;
         let parts: Vec<&str> = key.split('.').collect();
         for (i, part) in parts.iter().enumerate() {

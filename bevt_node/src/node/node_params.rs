@@ -163,7 +163,7 @@ pub fn params_from_file(
     node_name: &str,
 ) -> Result<BTreeMap<String, Value>, LaunchError> {
     let doc: Value =
-        serde_norway::from_str(text).map_err(|e| param_err("--params-file", e.to_string()))?;
+        crate::yaml::parse(text, "--params-file").map_err(|e| param_err("--params-file", e))?;
     let mut out = BTreeMap::new();
     let Value::Mapping(top) = &doc else {
         return Err(param_err(
@@ -288,12 +288,12 @@ fn collect_params(
 ) -> Result<BTreeMap<String, Value>, LaunchError> {
     let mut params = BTreeMap::new();
     for f in files {
-        let text = std::fs::read_to_string(f)
-            .map_err(|e| param_err("--params-file", format!("{f}: {e}")))?;
+        let text = crate::yaml::read_file(std::path::Path::new(f))
+            .map_err(|e| param_err("--params-file", e))?;
         params.extend(params_from_file(&text, node_name)?);
     }
     for (k, v) in sets {
-        let val: Value = serde_norway::from_str(&v).map_err(|e| param_err(&k, e.to_string()))?;
+        let val: Value = crate::yaml::parse(&v, "value").map_err(|e| param_err(&k, e))?;
         params.insert(k, val);
     }
     Ok(params)

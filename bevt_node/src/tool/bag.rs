@@ -168,8 +168,8 @@ pub fn open_bag(path: &Path, limits: BagLimits) -> Result<Bag, BagError> {
 }
 
 fn open_with_metadata(dir: &Path, meta: &Path, limits: BagLimits) -> Result<Bag, BagError> {
-    let text = std::fs::read_to_string(meta).map_err(|e| open_err(meta, e.to_string()))?;
-    let doc: Value = serde_norway::from_str(&text).map_err(|e| open_err(meta, e.to_string()))?;
+    let text = crate::yaml::read_file(meta).map_err(|e| open_err(meta, e))?;
+    let doc: Value = crate::yaml::parse(&text, "metadata.yaml").map_err(|e| open_err(meta, e))?;
     let info = doc
         .get("rosbag2_bagfile_information")
         .ok_or_else(|| open_err(meta, "no rosbag2_bagfile_information"))?;
