@@ -448,6 +448,19 @@ impl BevtTracker {
         }
     }
 
+    /// Loads every model `spec` names (the CNN backbone, the re-detection verifier's
+    /// networks) as a tracker would at initialisation, so that a program can refuse a bad
+    /// path at start-up instead of at the operator's first box. Loaded plans are cached per
+    /// process, so the tracker built later does not load them again.
+    ///
+    /// # Errors
+    /// The first model that cannot be loaded, naming its configuration key.
+    pub fn check_models(spec: &TrackerSpec) -> Result<(), TrackError> {
+        Self::build_extractor(spec)?;
+        Self::build_verifier(spec)?;
+        Ok(())
+    }
+
     /// The re-detection verifier `spec` names (`None` for `redetection.verifier: none`).
     fn build_verifier(spec: &TrackerSpec) -> Result<Option<Box<dyn Verifier>>, TrackError> {
         let r = &spec.config.redetection;

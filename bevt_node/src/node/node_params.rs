@@ -53,6 +53,9 @@ pub enum LaunchError {
     /// DDS Security is enforced but not usable.
     #[error("{0}")]
     Security(#[from] SecurityError),
+    /// A model the tracker configuration names cannot be loaded.
+    #[error("tracker models: {0}")]
+    Models(String),
 }
 
 /// Everything the node needs to start.
@@ -539,6 +542,9 @@ pub fn launch_from_args(
     }
     check_size_limits(&ros_settings, &node)?;
     let tracker = load_config(None, &tracker_sets)?;
+    // A bad model path must stop start-up, not refuse every later initialisation.
+    bevt_core::BevtTracker::check_models(&tracker)
+        .map_err(|e| LaunchError::Models(e.to_string()))?;
     if cl.demo && security.enable {
         return Err(LaunchError::Args(
             "--demo runs unsecured (its in-process camera and ground station have no DDS \
@@ -562,6 +568,27 @@ mod tests {
 
     fn args(s: &str) -> Vec<String> {
         s.split_whitespace().map(String::from).collect()
+    }
+
+    #[test]
+    fn a_bad_verifier_model_stops_start_up_naming_its_key() {
+        let dir = std::env::temp_dir().join(format!("bevt_models_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let not_onnx = dir.join("not_onnx.onnx");
+        std::fs::write(&not_onnx, b"this is not a network").unwrap();
+        for (key, path) in [
+            ("verifier_backbone", dir.join("missing.onnx")),
+            ("verifier_head", not_onnx.clone()),
+        ] {
+            let args = vec![
+                "--ros-args".to_string(),
+                "-p".to_string(),
+                format!("tracker.redetection.{key}:={}", path.display()),
+            ];
+            let e = launch_from_args(&args, |_| None).err().unwrap().to_string();
+            assert!(e.contains(&format!("redetection.{key}")), "{e}");
+        }
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
