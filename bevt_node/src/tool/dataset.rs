@@ -395,6 +395,29 @@ fn open_manifest(root: &Path, path: &Path) -> Result<Dataset, DatasetError> {
         reason: e.to_string(),
     })?;
     check_names(m.sequences.iter().map(|s| s.name.as_str()), path)?;
+    // The manifest names files inside the dataset: an absolute path or a `..` would make
+    // `bevt eval` read (and report on) any file of the machine.
+    for seq in &m.sequences {
+        for (field, rel) in [("anno", &seq.anno), ("img_dir", &seq.img_dir)] {
+            let p = Path::new(rel);
+            let escapes = p.is_absolute()
+                || p.components().any(|c| {
+                    !matches!(
+                        c,
+                        std::path::Component::Normal(_) | std::path::Component::CurDir
+                    )
+                });
+            if escapes {
+                return Err(DatasetError::Manifest {
+                    path: path.to_path_buf(),
+                    reason: format!(
+                        "sequence {:?}: {field} {rel:?} is not a path inside the dataset (absolute or with '..')",
+                        seq.name
+                    ),
+                });
+            }
+        }
+    }
     let sequences = m
         .sequences
         .into_iter()
@@ -660,6 +683,35 @@ mod tests {
             serde_json::json!({ "sequences": list }).to_string(),
         )?;
         std::fs::write(dir.join("a.txt"), "1,1,10,10\n2,2,10,10\n")?;
+        Ok(())
+    }
+
+    #[test]
+    fn a_manifest_cannot_point_outside_the_dataset() -> Result<(), Box<dyn std::error::Error>> {
+        let dir = std::env::temp_dir().join(format!("bevt_escape_{}", std::process::id()));
+        for (img_dir, anno) in [
+            ("img", "../../../etc/passwd"),
+            ("img", "/etc/passwd"),
+            ("../outside", "a.txt"),
+            ("img/../../x", "a.txt"),
+        ] {
+            std::fs::create_dir_all(&dir)?;
+            let seq = serde_json::json!({"name": "s", "img_dir": img_dir, "anno": anno});
+            std::fs::write(
+                dir.join("sequences.json"),
+                serde_json::json!({ "sequences": [seq] }).to_string(),
+            )?;
+            match open_dataset(&dir) {
+                Err(DatasetError::Manifest { reason, .. }) => {
+                    assert!(reason.contains("not a path inside the dataset"), "{reason}");
+                }
+                other => panic!("{img_dir} {anno}: {other:?}"),
+            }
+        }
+        // Inside is fine, "./" included.
+        manifest(&dir, &[("ok", 4)])?;
+        open_dataset(&dir)?;
+        std::fs::remove_dir_all(&dir)?;
         Ok(())
     }
 
