@@ -144,7 +144,9 @@ struct ReplayArgs {
     /// Image topic (sensor_msgs/msg/Image or sensor_msgs/msg/CompressedImage).
     #[arg(long)]
     topic: String,
-    /// Initial box `x,y,w,h`, image pixels from 0 (as the node's reinit service).
+    /// Initial box `x,y,w,h`, image pixels from 0 (as the node's reinit service; the CSV
+    /// is 0-based too). Annotation files (groundtruth_rect.txt) and `bevt eval`'s results
+    /// count from 1: subtract 1 from their x and y, or the replay starts 1 px off.
     #[arg(long)]
     init: String,
     /// Apply the initial box on the N-th message of the topic (from 1, as `bevt track`'s
