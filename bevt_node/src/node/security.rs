@@ -158,6 +158,14 @@ pub enum SecurityError {
     /// This build has no DDS Security.
     #[error("SECURITY ERROR (strategy Enforce): this bevt_node was built without the `security` cargo feature")]
     NotBuilt,
+    /// The enclave's identity certificate or key is not usable now.
+    #[error("SECURITY ERROR (strategy Enforce): {}: {reason}", .file.display())]
+    BadIdentity {
+        /// The certificate or key file.
+        file: PathBuf,
+        /// Why (expired, not yet valid, unreadable, the key does not match).
+        reason: String,
+    },
 }
 
 /// How every [`SecurityError`] message begins.
@@ -223,12 +231,61 @@ impl SecurityOptions {
             .filter(|f| !dir.join(f).is_file())
             .map(|f| (*f).to_string())
             .collect();
-        if missing.is_empty() {
-            Ok(dir)
-        } else {
-            Err(SecurityError::MissingFiles { dir, missing })
+        if !missing.is_empty() {
+            return Err(SecurityError::MissingFiles { dir, missing });
         }
+        #[cfg(feature = "security")]
+        check_identity(&dir)?;
+        Ok(dir)
     }
+}
+
+/// The enclave's identity, checked before any DDS traffic: `cert.pem` is valid now (not
+/// expired, not before its start) and `key.pem` is its private key. RustDDS would otherwise
+/// start with an expired certificate or a key that signs nothing its peers can verify.
+///
+/// # Errors
+/// [`SecurityError::BadIdentity`] naming the file and the reason.
+#[cfg(feature = "security")]
+pub fn check_identity(dir: &Path) -> Result<(), SecurityError> {
+    use openssl::asn1::Asn1Time;
+    use std::cmp::Ordering;
+    let bad = |file: &str, reason: String| SecurityError::BadIdentity {
+        file: dir.join(file),
+        reason,
+    };
+    let read = |file: &str| std::fs::read(dir.join(file)).map_err(|e| bad(file, e.to_string()));
+    let cert = openssl::x509::X509::from_pem(&read("cert.pem")?)
+        .map_err(|e| bad("cert.pem", format!("not a PEM certificate ({e})")))?;
+    let now = Asn1Time::days_from_now(0).map_err(|e| bad("cert.pem", e.to_string()))?;
+    let cmp = |t: &openssl::asn1::Asn1TimeRef| t.compare(&now).unwrap_or(Ordering::Equal);
+    if cmp(cert.not_before()) == Ordering::Greater {
+        return Err(bad(
+            "cert.pem",
+            format!(
+                "the identity certificate is not valid before {}",
+                cert.not_before()
+            ),
+        ));
+    }
+    if cmp(cert.not_after()) == Ordering::Less {
+        return Err(bad(
+            "cert.pem",
+            format!("the identity certificate expired on {}", cert.not_after()),
+        ));
+    }
+    let key = openssl::pkey::PKey::private_key_from_pem(&read("key.pem")?)
+        .map_err(|e| bad("key.pem", format!("not a PEM private key ({e})")))?;
+    let public = cert
+        .public_key()
+        .map_err(|e| bad("cert.pem", e.to_string()))?;
+    if !public.public_eq(&key) {
+        return Err(bad(
+            "key.pem",
+            "the private key does not match the identity certificate cert.pem".into(),
+        ));
+    }
+    Ok(())
 }
 
 /// `<keystore>/enclaves/<enclave without its leading />` (rcl's lookup); the enclave must
@@ -283,8 +340,79 @@ mod tests {
             for f in files {
                 std::fs::write(d.join(f), "x").unwrap();
             }
+            if enclave == "ok" {
+                let (cert, key) = identity(-1, 30);
+                std::fs::write(d.join("cert.pem"), cert).unwrap();
+                std::fs::write(d.join("key.pem"), key).unwrap();
+            }
         }
         ks
+    }
+
+    /// A self-signed P-256 identity valid from `from_days` to `to_days` (relative to now):
+    /// (cert.pem, key.pem).
+    #[cfg(feature = "security")]
+    fn identity(from_days: i64, to_days: i64) -> (Vec<u8>, Vec<u8>) {
+        use openssl::{asn1::Asn1Time, ec, nid::Nid, pkey::PKey, x509};
+        let group = ec::EcGroup::from_curve_name(Nid::X9_62_PRIME256V1).unwrap();
+        let key = PKey::from_ec_key(ec::EcKey::generate(&group).unwrap()).unwrap();
+        let mut name = x509::X509NameBuilder::new().unwrap();
+        name.append_entry_by_text("CN", "/ok").unwrap();
+        let name = name.build();
+        let at = |days: i64| {
+            let now = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap()
+                .as_secs() as i64;
+            Asn1Time::from_unix(now + days * 86_400).unwrap()
+        };
+        let mut b = x509::X509Builder::new().unwrap();
+        b.set_version(2).unwrap();
+        b.set_subject_name(&name).unwrap();
+        b.set_issuer_name(&name).unwrap();
+        b.set_pubkey(&key).unwrap();
+        b.set_not_before(&at(from_days)).unwrap();
+        b.set_not_after(&at(to_days)).unwrap();
+        b.sign(&key, openssl::hash::MessageDigest::sha256())
+            .unwrap();
+        (
+            b.build().to_pem().unwrap(),
+            key.private_key_to_pem_pkcs8().unwrap(),
+        )
+    }
+
+    #[cfg(feature = "security")]
+    #[test]
+    fn an_expired_future_or_mismatched_identity_is_refused_naming_the_file() {
+        let ks = keystore("identity");
+        let dir = ks.join("enclaves").join("ok");
+        let o = opts(
+            &[
+                (ENV_ENABLE, "true"),
+                (ENV_STRATEGY, "Enforce"),
+                (ENV_KEYSTORE, ks.to_str().unwrap()),
+            ],
+            Some("/ok"),
+        );
+        assert!(matches!(o.resolve(), Ok(DdsSecurity::Enclave(_))));
+        for (from, to, file, why) in [
+            (-30, -1, "cert.pem", "expired on"),
+            (2, 30, "cert.pem", "not valid before"),
+        ] {
+            let (cert, key) = identity(from, to);
+            std::fs::write(dir.join("cert.pem"), cert).unwrap();
+            std::fs::write(dir.join("key.pem"), key).unwrap();
+            let e = o.resolve().unwrap_err().to_string();
+            assert!(e.contains(file) && e.contains(why), "{e}");
+        }
+        // A valid certificate with another identity's key.
+        let (cert, _) = identity(-1, 30);
+        let (_, other_key) = identity(-1, 30);
+        std::fs::write(dir.join("cert.pem"), cert).unwrap();
+        std::fs::write(dir.join("key.pem"), other_key).unwrap();
+        let e = o.resolve().unwrap_err().to_string();
+        assert!(e.contains("key.pem") && e.contains("does not match"), "{e}");
+        let _ = std::fs::remove_dir_all(&ks);
     }
 
     #[test]
