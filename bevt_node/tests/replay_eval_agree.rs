@@ -6,12 +6,11 @@
 //!
 //! Needs `../shared` (the dev set); skipped with the reason when absent, except under
 //! `CI=true`, where CI provides it.
-#![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a failed setup aborts the test
 
+use crate::common;
 use bevt_msgs::builtin_interfaces::Time;
 use bevt_msgs::sensor_msgs::CompressedImage;
 use bevt_msgs::std_msgs::Header;
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -62,16 +61,7 @@ fn a_replayed_jpeg_recording_gives_the_boxes_of_bevt_eval() {
     std::fs::create_dir_all(&dir).unwrap();
     // The recording: every frame's original JPEG bytes, 10 Hz.
     let bag = dir.join("flight.mcap");
-    let mut w = mcap::WriteOptions::new()
-        .profile("ros2")
-        .create(std::io::BufWriter::new(
-            std::fs::File::create(&bag).unwrap(),
-        ))
-        .unwrap();
-    let s = w
-        .add_schema("sensor_msgs/msg/CompressedImage", "ros2msg", b"")
-        .unwrap();
-    let c = w.add_channel(s, TOPIC, "cdr", &BTreeMap::new()).unwrap();
+    let mut rec = common::Recording::create(&bag, TOPIC, "sensor_msgs/msg/CompressedImage");
     for (i, n) in (start..=end).enumerate() {
         let file = root
             .join(seq["img_dir"].as_str().unwrap())
@@ -85,18 +75,9 @@ fn a_replayed_jpeg_recording_gives_the_boxes_of_bevt_eval() {
             format: "jpeg".into(),
             data: std::fs::read(file).unwrap(),
         };
-        let mut data = vec![0, 1, 0, 0];
-        data.extend(cdr_encoding::to_vec::<_, byteorder::LittleEndian>(&msg).unwrap());
-        let h = mcap::records::MessageHeader {
-            channel_id: c,
-            sequence: i as u32,
-            log_time: t as u64,
-            publish_time: t as u64,
-        };
-        w.write_to_known_channel(&h, &data).unwrap();
+        rec.write(t, &msg);
     }
-    w.finish().unwrap();
-    drop(w);
+    rec.finish();
     // eval: its result file, 1-based like the annotation.
     let out = Command::new(env!("CARGO_BIN_EXE_bevt"))
         .args([

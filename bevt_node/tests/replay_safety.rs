@@ -2,13 +2,12 @@
 //! an input (or each other) are refused before anything is written, a failed rerun leaves
 //! the earlier outputs untouched, and SIGINT / SIGTERM finish valid outputs of what was
 //! processed.
-#![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a failed setup aborts the test
 
+use crate::common;
 use bevt_core::eval::synth::SynthParams;
 use bevt_msgs::builtin_interfaces::Time;
 use bevt_msgs::sensor_msgs::Image;
 use bevt_msgs::std_msgs::Header;
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
@@ -33,15 +32,7 @@ fn write_bag(path: &Path, frames: usize) -> String {
         target: (40.0, 32.0),
         ..SynthParams::default()
     };
-    let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
-    let mut w = mcap::WriteOptions::new()
-        .profile("ros2")
-        .create(file)
-        .unwrap();
-    let s = w
-        .add_schema("sensor_msgs/msg/Image", "ros2msg", b"")
-        .unwrap();
-    let c = w.add_channel(s, TOPIC, "cdr", &BTreeMap::new()).unwrap();
+    let mut rec = common::Recording::create(path, TOPIC, "sensor_msgs/msg/Image");
     for i in 0..frames {
         let f = seq.frame(i);
         let t = 1_700_000_000_000_000_000i64 + i as i64 * 100_000_000;
@@ -57,17 +48,9 @@ fn write_bag(path: &Path, frames: usize) -> String {
             step: (seq.width * 3) as u32,
             data: f.rgb,
         };
-        let mut data = vec![0, 1, 0, 0];
-        data.extend(cdr_encoding::to_vec::<_, byteorder::LittleEndian>(&msg).unwrap());
-        let h = mcap::records::MessageHeader {
-            channel_id: c,
-            sequence: i as u32,
-            log_time: t as u64,
-            publish_time: t as u64,
-        };
-        w.write_to_known_channel(&h, &data).unwrap();
+        rec.write(t, &msg);
     }
-    w.finish().unwrap();
+    rec.finish();
     let b = seq.frame(0).truth;
     format!("{},{},{},{}", b.x, b.y, b.w, b.h)
 }
