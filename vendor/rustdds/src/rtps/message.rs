@@ -971,6 +971,86 @@ mod tests {
     assert_eq!(generic_multi, fast_multi);
   }
 
+  // BEVT patch (sent DATA_FRAG, issue 17): the last DATA_FRAG of a fragmented
+  // service reply (inline QoS: related sample identity; a run whose length is
+  // not a multiple of 4) followed by a HEARTBEAT, as the writer sends them. The
+  // datagram is as long as its submessage headers declare (upstream wrote one
+  // more octet: speedy's Option tag before the ParameterList) and reads back.
+  #[test]
+  fn fragmented_reply_datagram_is_its_declared_length_and_reads_back() {
+    use crate::{
+      dds::with_key::datawriter::WriteOptionsBuilder,
+      messages::submessages::elements::serialized_payload::SerializedPayload,
+      RepresentationIdentifier,
+      structure::{guid::EntityKind, rpc::SampleIdentity},
+    };
+    let writer_guid = GUID::dummy_test_guid(EntityKind::WRITER_NO_KEY_USER_DEFINED);
+    let request_id = SampleIdentity {
+      writer_guid: GUID::dummy_test_guid(EntityKind::WRITER_NO_KEY_BUILT_IN),
+      sequence_number: SequenceNumber::new(7),
+    };
+    let sample: Vec<u8> = (0..997u32).map(|i| (i * 13) as u8).collect();
+    let change = CacheChange::new(
+      writer_guid,
+      SequenceNumber::new(5),
+      WriteOptionsBuilder::new()
+        .related_sample_identity(request_id)
+        .build(),
+      DDSData::new(SerializedPayload::new(
+        RepresentationIdentifier::CDR_LE,
+        sample,
+      )),
+    );
+    let sample_size = 997 + 4; // with the 4-octet representation header
+    let built = MessageBuilder::new()
+      .data_frag_msg(
+        &change,
+        EntityId::UNKNOWN,
+        writer_guid,
+        FragmentNumber::new(3), // the last run: octets 512..1001
+        2,
+        256,
+        sample_size,
+        Endianness::LittleEndian,
+        None,
+      )
+      .heartbeat_msg(
+        writer_guid.entity_id,
+        SequenceNumber::new(1),
+        SequenceNumber::new(5),
+        1,
+        Endianness::LittleEndian,
+        EntityId::UNKNOWN,
+        true,
+        false,
+      );
+    let declared = built.len_serialized();
+    let msg = built.add_header_and_build(writer_guid.prefix);
+    let fast = msg.write_to_vec_fast(Endianness::LittleEndian).unwrap();
+    assert_eq!(fast.len(), declared);
+    assert_eq!(fast, msg.write_to_vec_with_ctx(Endianness::LittleEndian).unwrap());
+
+    let back = Message::read_from_buffer(&Bytes::from(fast)).unwrap();
+    assert_eq!(back.submessages.len(), 2);
+    match &back.submessages[0].body {
+      SubmessageBody::Writer(WriterSubmessage::DataFrag(df, _)) => {
+        let qos = df.inline_qos.as_ref().expect("inline QoS read back");
+        assert!(qos
+          .parameters
+          .iter()
+          .any(|p| p.parameter_id == ParameterId::PID_RELATED_SAMPLE_IDENTITY));
+        assert_eq!(df.fragment_starting_num, FragmentNumber::new(3));
+        assert_eq!(df.data_size, sample_size);
+        assert!(df.serialized_payload.len() >= 489);
+      }
+      other => panic!("expected the DATA_FRAG first, read {other:?}"),
+    }
+    assert!(matches!(
+      back.submessages[1].body,
+      SubmessageBody::Writer(WriterSubmessage::Heartbeat(..))
+    ));
+  }
+
   #[test]
   fn try_submessage_content_length_rejects_overflow() {
     assert!(try_submessage_content_length(65535).is_ok());

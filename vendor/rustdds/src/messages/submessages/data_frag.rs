@@ -8,6 +8,7 @@ use bytes::Bytes;
 
 use crate::{
   messages::submessages::{elements::parameter_list::ParameterList, submessages::*},
+  serialization::padding_needed_for_alignment_4,
   structure::{
     guid::EntityId,
     sequence_number::{FragmentNumber, SequenceNumber},
@@ -87,8 +88,18 @@ impl DataFrag {
     2 + // fragmentsInSubmessage
     2 + // fragmentSize
     4 + // sampleSize
-    self.inline_qos.as_ref().map(|q| q.len_serialized() ).unwrap_or(0) + // QoS ParameterList
-    self.serialized_payload.len()
+    self.inline_qos_to_write().map(|q| q.len_serialized() ).unwrap_or(0) + // QoS ParameterList
+    self.serialized_payload.len() +
+    // BEVT patch (sent DATA_FRAG, issue 17): padding to the 32-bit boundary on
+    // which the next submessage must start (RTPS 2.5 9.4.1), as `Data` does.
+    padding_needed_for_alignment_4(self.serialized_payload.len())
+  }
+
+  /// BEVT patch (sent DATA_FRAG, issue 17): the inline QoS that is written, and
+  /// counted in `len_serialized`: none when absent or empty (an empty list
+  /// would need the InlineQos flag, which the writer sets only when it is not).
+  fn inline_qos_to_write(&self) -> Option<&ParameterList> {
+    self.inline_qos.as_ref().filter(|q| !q.parameters.is_empty())
   }
 
   /// Spec talks about (expected) total number of fragments.
@@ -310,10 +321,21 @@ impl<C: Context> Writable<C> for DataFrag {
     writer.write_value(&self.fragments_in_submessage)?;
     writer.write_value(&self.fragment_size)?;
     writer.write_value(&self.data_size)?;
-    if self.inline_qos.is_some() && !self.inline_qos.as_ref().unwrap().parameters.is_empty() {
-      writer.write_value(&self.inline_qos)?;
+    // BEVT patch (sent DATA_FRAG, issue 17): upstream wrote `&self.inline_qos`,
+    // an `Option`, which speedy prefixes with a one-octet tag: every DATA_FRAG
+    // with inline QoS (a fragmented service reply carries the related sample
+    // identity) had a stray octet before its ParameterList, was one octet longer
+    // than its octetsToNextHeader, and was malformed for every receiver.
+    if let Some(inline_qos) = self.inline_qos_to_write() {
+      writer.write_value(inline_qos)?;
     }
     writer.write_bytes(&self.serialized_payload)?;
+    // The next submessage starts on a 32-bit boundary (RTPS 2.5 9.4.1); a
+    // receiver takes the fragment bytes it expects from the sample size and
+    // ignores what follows, as it does after a Fast DDS DATA_FRAG.
+    for _ in 0..padding_needed_for_alignment_4(self.serialized_payload.len()) {
+      writer.write_u8(0)?;
+    }
     Ok(())
   }
 }
@@ -404,5 +426,55 @@ mod tests {
     };
     let bytes = serialize_body(&df);
     assert!(DataFrag::deserialize(&bytes, BitFlags::<DATAFRAG_Flags>::empty()).is_err());
+  }
+
+  // BEVT patch (sent DATA_FRAG, issue 17): a DATA_FRAG that carries inline QoS (a
+  // fragmented service reply: the related sample identity) is written exactly as
+  // long as it declares, with no stray Option tag, padded to 4 octets, and reads
+  // back with its inline QoS and fragment intact.
+  #[test]
+  fn datafrag_with_inline_qos_round_trips_at_its_declared_length() {
+    use crate::{
+      messages::submessages::elements::parameter::Parameter,
+      structure::parameter_id::ParameterId,
+    };
+    let mut qos = ParameterList::new();
+    qos.push(Parameter {
+      parameter_id: ParameterId::PID_RELATED_SAMPLE_IDENTITY,
+      value: (0u8..24).collect(),
+    });
+    // The last run of a 1001-octet sample: 233 octets, not a multiple of 4.
+    let last_run: Vec<u8> = (0..233u32).map(|i| (i * 7) as u8).collect();
+    let le = BitFlags::<DATAFRAG_Flags>::from_flag(DATAFRAG_Flags::Endianness);
+    for (inline_qos, flags) in [
+      (Some(qos), le | DATAFRAG_Flags::InlineQos),
+      (None, le),
+      // An empty list is not written (no InlineQos flag), nor counted.
+      (Some(ParameterList::new()), le),
+    ] {
+      let df = DataFrag {
+        writer_sn: SequenceNumber::new(3),
+        fragment_starting_num: FragmentNumber::new(4),
+        fragments_in_submessage: 1,
+        fragment_size: 256,
+        data_size: 1001,
+        inline_qos: inline_qos.clone(),
+        serialized_payload: Bytes::from(last_run.clone()),
+        ..Default::default()
+      };
+      let bytes = serialize_body(&df);
+      assert_eq!(bytes.len(), df.len_serialized(), "declared length, qos {inline_qos:?}");
+      assert_eq!(bytes.len() % 4, 0, "the next submessage starts 32-bit aligned");
+      let back = DataFrag::deserialize(&bytes, flags).expect("reads back");
+      assert_eq!(
+        back.inline_qos.filter(|q| !q.parameters.is_empty()),
+        inline_qos.filter(|q| !q.parameters.is_empty())
+      );
+      assert_eq!(back.fragment_starting_num, FragmentNumber::new(4));
+      assert_eq!(back.data_size, 1001);
+      // The padding follows the fragment; the receiver takes what it expects.
+      assert_eq!(&back.serialized_payload[..233], &last_run[..]);
+      assert!(back.serialized_payload[233..].iter().all(|&b| b == 0));
+    }
   }
 }
