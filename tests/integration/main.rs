@@ -12,6 +12,7 @@ mod lost;
 mod node;
 mod node_limits;
 mod param_flood;
+mod rclpy_interop;
 mod real_data;
 mod replay;
 mod ros_tools;

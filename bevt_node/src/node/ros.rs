@@ -233,6 +233,16 @@ pub fn ros_name(settings: &RosSettings, name: &str) -> Result<Name, RosError> {
         .map_err(|e| RosError::Name(name.clone(), format!("{e:?}")))
 }
 
+/// How often the node announces itself to discovery (SPDP; RustDDS's default is 10 s).
+/// ROS 2's default discovery range (`SUBNET`) has Fast DDS peers announce by multicast
+/// only, which a node listening on loopback (the default `network_interfaces`) never
+/// hears: such a peer finds the node only when the node's announcement, also sent by
+/// unicast to the same-host well-known ports, reaches it. At 10 s a `ros2 topic list`
+/// usually missed the node; at 1 s it costs 12 datagrams of ~400 bytes a second on
+/// loopback (and one multicast datagram where multicast is used). The lease the node
+/// advertises stays 50 s.
+pub const SPDP_ANNOUNCE_PERIOD: Duration = Duration::from_secs(1);
+
 /// A DDS context that listens and sends only on `settings.networks` (`0.0.0.0`: all
 /// interfaces) and reassembles samples of at most `settings.max_sample_bytes`.
 pub fn context(settings: &RosSettings) -> Result<Context, RosError> {
@@ -263,7 +273,8 @@ pub fn context(settings: &RosSettings) -> Result<Context, RosError> {
         .with_only_networks(settings.networks.clone())
         .fragment_limits(FragmentLimits::with_max_sample_size(
             settings.max_sample_bytes,
-        ));
+        ))
+        .spdp_period(SPDP_ANNOUNCE_PERIOD);
     if let DdsSecurity::Enclave(dir) = &settings.security {
         #[cfg(feature = "security")]
         {
@@ -374,9 +385,19 @@ struct Endpoints {
     params: ParamServers,
 }
 
+/// The QoS of the debug image: reliable, keep last 1. Reliable matches both reliable
+/// subscribers (RViz's and rclpy's default, which a best-effort publisher would not match)
+/// and best-effort ones, and lets a reliable subscriber have lost fragments of a ~1 MB
+/// image re-sent (NACK_FRAG): on loopback a best-effort burst of ~17 datagrams overflows a
+/// default-sized (208 KiB) receive buffer, and only 2 of ~20 images reached an rclpy
+/// subscriber. Keep last 1 bounds what is held for re-sending to one image.
+pub fn debug_image_qos() -> QosProfile {
+    QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast { depth: 1 })
+}
+
 /// The `debug_image` publisher.
 fn debug_publisher(node: &mut Node, settings: &RosSettings) -> Result<Publisher<Image>, RosError> {
-    let cq = camera_qos();
+    let cq = debug_image_qos();
     let t = node
         .create_topic(
             &ros_name(settings, names::DEBUG_IMAGE)?,
@@ -568,6 +589,9 @@ struct Worker<'a> {
     last_refusal: String,
     next_diag: Instant,
     next_debug: Instant,
+    /// The stamp of the last debug image published: a frame is drawn once, so the debug
+    /// image stops when the camera does instead of repeating its last frame.
+    last_debug_stamp: Option<bevt_msgs::builtin_interfaces::Time>,
     debug_period: Duration,
     /// `debug_image_rate_hz` now (0 = off).
     debug_rate_hz: f64,
@@ -748,8 +772,11 @@ impl Worker<'_> {
         if let (Some(p), true) = (&self.ep.pub_debug, self.debug_rate_hz > 0.0) {
             if now >= self.next_debug {
                 if let Some(img) = self.core.debug_image() {
-                    self.next_debug = later(now, self.debug_period);
-                    let _ = p.publish(img);
+                    if self.last_debug_stamp != Some(img.header.stamp) {
+                        self.next_debug = later(now, self.debug_period);
+                        self.last_debug_stamp = Some(img.header.stamp);
+                        let _ = p.publish(img);
+                    }
                 }
             }
         }
@@ -800,6 +827,7 @@ pub fn run(
         last_refusal: String::new(),
         next_diag: Instant::now(),
         next_debug: Instant::now(),
+        last_debug_stamp: None,
         debug_period,
     };
     w.log(

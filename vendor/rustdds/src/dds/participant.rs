@@ -81,6 +81,8 @@ pub struct DomainParticipantBuilder {
 
   fragment_limits: FragmentLimits,
 
+  spdp_period: std::time::Duration,
+
   socket_receive_buffer_size: usize,
   socket_send_buffer_size: usize,
 
@@ -97,6 +99,7 @@ impl DomainParticipantBuilder {
       only_networks: None,
       same_host_loopback: true,
       fragment_limits: FragmentLimits::default(),
+      spdp_period: Discovery::SPDP_PUBLISH_PERIOD,
       socket_receive_buffer_size: Self::DEFAULT_SOCKET_RECEIVE_BUFFER_SIZE,
       socket_send_buffer_size: Self::DEFAULT_SOCKET_SEND_BUFFER_SIZE,
       #[cfg(feature = "security")]
@@ -143,6 +146,20 @@ impl DomainParticipantBuilder {
   /// [`FragmentLimits`]; the default caps samples at 256 MiB.
   pub fn fragment_limits(mut self, limits: FragmentLimits) -> Self {
     self.fragment_limits = limits;
+    self
+  }
+
+  /// How often the participant announces itself to discovery (SPDP), default
+  /// 10 s. A peer that only announces by multicast (ROS 2's default discovery
+  /// range) while this participant listens only on loopback, where there is
+  /// no multicast, learns of it only from these announcements, so the period
+  /// is its first-contact delay. The advertised lease stays 5 × the default
+  /// period. Values are clamped to 100 ms ..= 10 min.
+  pub fn spdp_period(mut self, period: std::time::Duration) -> Self {
+    self.spdp_period = period.clamp(
+      std::time::Duration::from_millis(100),
+      std::time::Duration::from_secs(600),
+    );
     self
   }
 
@@ -345,6 +362,7 @@ impl DomainParticipantBuilder {
     #[cfg(feature = "security")]
     let security_plugins_handle = self.security_plugins.map(SecurityPluginsHandle::new);
 
+    let spdp_period = self.spdp_period;
     // intermediate DP wrapper
     let dp = DomainParticipantDisc::new(
       self.domain_id,
@@ -390,6 +408,7 @@ impl DomainParticipantBuilder {
           security_plugins_handle,
           discovery_waker,
           discovery_sample_receiver,
+          spdp_period,
         ) {
           discovery.discovery_event_loop(); // run the event loop
         }

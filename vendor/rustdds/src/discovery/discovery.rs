@@ -296,12 +296,16 @@ pub(crate) struct Discovery {
   // discovery phase. See `spdp_receive`.
   #[cfg(feature = "security")]
   spdp_quick_response_sent: std::collections::HashSet<GuidPrefix>,
+
+  // BEVT patch (discovery by ROS 2 defaults, issue 17): how often the participant
+  // announces itself (SPDP); `SPDP_PUBLISH_PERIOD` unless the builder set it.
+  spdp_period: StdDuration,
 }
 
 impl Discovery {
   const PARTICIPANT_CLEANUP_PERIOD: StdDuration = StdDuration::from_secs(2);
   const TOPIC_CLEANUP_PERIOD: StdDuration = StdDuration::from_secs(60); // timer for cleaning up inactive topics
-  const SPDP_PUBLISH_PERIOD: StdDuration = StdDuration::from_secs(10);
+  pub(crate) const SPDP_PUBLISH_PERIOD: StdDuration = StdDuration::from_secs(10);
   const CHECK_PARTICIPANT_MESSAGES: StdDuration = StdDuration::from_secs(1);
   #[cfg(feature = "security")]
   const CACHED_SECURE_DISCOVERY_MESSAGE_RESEND_PERIOD: StdDuration = StdDuration::from_secs(1);
@@ -318,6 +322,7 @@ impl Discovery {
     security_plugins_opt: Option<SecurityPluginsHandle>,
     waker: LoopWaker,
     discovery_samples: ReadyReceiver<Token>,
+    spdp_period: StdDuration,
   ) -> CreateResult<Self> {
     // helper macro to handle initialization failures.
     macro_rules! try_construct {
@@ -693,6 +698,7 @@ impl Discovery {
       dcps_participant_volatile_message_secure,
       #[cfg(feature = "security")]
       spdp_quick_response_sent: std::collections::HashSet::new(),
+      spdp_period,
     })
   }
 
@@ -862,7 +868,7 @@ impl Discovery {
                   // quick response does not.
                   if reschedule {
                     self.discovery_timer.borrow_mut().set_timeout(
-                      Self::SPDP_PUBLISH_PERIOD,
+                      self.spdp_period,
                       DiscoveryTimerEvent::SendParticipantInfo { reschedule: true },
                     );
                   }
@@ -1444,7 +1450,8 @@ impl Discovery {
 
   fn spdp_publish(&self, local_dp: &DomainParticipant) {
     // setting 5 times the duration so lease doesn't break if update fails once or
-    // twice
+    // twice. BEVT patch: the default period's, also when announcing more often (a
+    // shorter period is for faster first contact, not for a shorter lease).
     let data = SpdpDiscoveredParticipantData::from_local_participant(
       local_dp,
       &self.security_opt,
