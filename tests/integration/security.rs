@@ -640,3 +640,178 @@ fn a_secured_writer_reaches_one_reader() {
 fn a_secured_writer_reaches_two_readers_of_one_topic_in_a_participant() {
     secured_delivery("sec_two_readers", bevt_tests::dds_domain(), 2);
 }
+
+/// Replaces `enclave`'s identity certificate with one for the same subject and key, signed
+/// by the keystore's identity CA, valid only in January 2020 (`openssl ca`: `x509 -req`
+/// cannot back-date).
+fn back_dated_identity(ks: &Path, enclave: &Path) {
+    let work = enclave.join("ca-work");
+    std::fs::create_dir_all(&work).unwrap();
+    std::fs::write(work.join("index.txt"), "").unwrap();
+    std::fs::write(work.join("serial"), "01\n").unwrap();
+    std::fs::write(
+        work.join("ca.cnf"),
+        format!(
+            "[ca]\ndefault_ca = c\n[c]\ndatabase = {0}/index.txt\nnew_certs_dir = {0}\n\
+             serial = {0}/serial\ndefault_md = sha256\npolicy = p\nunique_subject = no\n\
+             [p]\ncommonName = supplied\n",
+            work.display()
+        ),
+    )
+    .unwrap();
+    let run = |args: &[&std::ffi::OsStr]| {
+        let out = Command::new("openssl").args(args).output().unwrap();
+        assert!(
+            out.status.success(),
+            "openssl {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let (cert, key, req) = (
+        enclave.join("cert.pem"),
+        enclave.join("key.pem"),
+        work.join("req.pem"),
+    );
+    let subject = Command::new("openssl")
+        .args(["x509", "-noout", "-subject", "-nameopt", "compat", "-in"])
+        .arg(&cert)
+        .output()
+        .unwrap();
+    let subject = String::from_utf8_lossy(&subject.stdout)
+        .trim()
+        .trim_start_matches("subject=")
+        .to_string();
+    let os = |s: &str| std::ffi::OsString::from(s);
+    run(&[
+        &os("req"),
+        &os("-new"),
+        &os("-key"),
+        key.as_os_str(),
+        &os("-subj"),
+        &os(&subject),
+        &os("-out"),
+        req.as_os_str(),
+    ]);
+    std::fs::remove_file(&cert).unwrap();
+    run(&[
+        &os("ca"),
+        &os("-batch"),
+        &os("-notext"),
+        &os("-config"),
+        work.join("ca.cnf").as_os_str(),
+        &os("-cert"),
+        ks.join("public/ca.cert.pem").as_os_str(),
+        &os("-keyfile"),
+        ks.join("private/ca.key.pem").as_os_str(),
+        &os("-in"),
+        req.as_os_str(),
+        &os("-out"),
+        cert.as_os_str(),
+        &os("-startdate"),
+        &os("20200101000000Z"),
+        &os("-enddate"),
+        &os("20200201000000Z"),
+    ]);
+}
+
+/// A copy of `from`'s enclave directory (symlinks followed) as `to`.
+fn copy_enclave(ks: &Path, from: &str, to: &str) -> PathBuf {
+    let (src, dst) = (ks.join("enclaves").join(from), ks.join("enclaves").join(to));
+    std::fs::create_dir_all(&dst).unwrap();
+    for e in std::fs::read_dir(&src).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), dst.join(e.file_name())).unwrap();
+    }
+    dst
+}
+
+/// Issue 17 §6: a peer whose identity certificate is out of date is refused in the
+/// handshake (RustDDS checked only its signature), and permissions out of date are
+/// reported as such (RustDDS said "subject name ... not found").
+#[test]
+fn certificate_and_permission_dates_are_checked() {
+    let Some(ks) = keystore("sec_dates") else {
+        return;
+    };
+    // The node's own permissions, expired: start-up refused, saying so.
+    let expired_grant = copy_enclave(&ks, "bevt_node", "expired_grant");
+    let xml = std::fs::read_to_string(expired_grant.join("permissions.xml")).unwrap();
+    let (a, b) = (
+        xml.find("<not_after>").unwrap() + "<not_after>".len(),
+        xml.find("</not_after>").unwrap(),
+    );
+    let xml = format!("{}2020-02-01T00:00:00{}", &xml[..a], &xml[b..]);
+    let (a, b) = (
+        xml.find("<not_before>").unwrap() + "<not_before>".len(),
+        xml.find("</not_before>").unwrap(),
+    );
+    let xml = format!("{}2020-01-01T00:00:00{}", &xml[..a], &xml[b..]);
+    std::fs::write(expired_grant.join("permissions.xml"), xml).unwrap();
+    let st = Command::new("openssl")
+        .args(["smime", "-sign", "-text", "-in"])
+        .arg(expired_grant.join("permissions.xml"))
+        .arg("-out")
+        .arg(expired_grant.join("permissions.p7s"))
+        .arg("-signer")
+        .arg(ks.join("public/ca.cert.pem"))
+        .arg("-inkey")
+        .arg(ks.join("private/ca.key.pem"))
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let k = ks.to_str().unwrap();
+    let env = [
+        ("ROS_SECURITY_ENABLE", "true"),
+        ("ROS_SECURITY_STRATEGY", "Enforce"),
+        ("ROS_SECURITY_KEYSTORE", k),
+    ];
+    let (running, err) = start_node(
+        &env,
+        &["--ros-args", "--enclave", "/expired_grant"],
+        Duration::from_secs(3),
+        |_| {},
+    );
+    println!("security: expired permissions: {}", err.trim());
+    assert!(!running, "started with expired permissions: {err}");
+    assert!(
+        err.contains("expired") && err.contains("2020-02-01"),
+        "no reason: {err}"
+    );
+
+    // A ground station whose certificate (same subject, key, CA and permissions as the
+    // authorised one) expired in 2020 gets no answer; the authorised one does.
+    let gs_expired = copy_enclave(&ks, "ground_station", "expired_gs");
+    back_dated_identity(&ks, &gs_expired);
+    let d = bevt_tests::dds_domain();
+    let stop = Arc::new(AtomicBool::new(false));
+    let core = NodeCore::new(
+        TrackerConfig::default().validate().unwrap(),
+        NodeSettings {
+            reinit_burst: 10,
+            ..NodeSettings::default()
+        },
+    );
+    let (s2, st2) = (settings(d, &ks, Some("bevt_node")), stop.clone());
+    let node = std::thread::spawn(move || run(core, &s2, st2, |_| {}));
+    let req = reinit_request(BBox::new(4.0, 4.0, 40.0, 32.0), Time::from_nanos(0), "");
+    let det = detection(BBox::new(4.0, 4.0, 40.0, 32.0), 0);
+    let late = Commander::new(&settings(d, &ks, Some("expired_gs"))).unwrap();
+    let (reinit, stopped) = late.attack(&req, &det, ATTACK_WINDOW);
+    println!("security: expired ground station: {reinit} reinit and {stopped} stop replies");
+    assert_eq!(
+        (reinit, stopped),
+        (0, 0),
+        "the expired identity was answered"
+    );
+    drop(late);
+    let valid = Commander::new(&settings(d, &ks, Some("ground_station"))).unwrap();
+    let answered = valid.call_stop(Duration::from_secs(30));
+    println!("security: authorised ground station: stop answered: {answered:?}");
+    assert!(
+        answered.is_some(),
+        "the control: the valid identity got no answer"
+    );
+    stop.store(true, Ordering::Relaxed);
+    node.join().unwrap().unwrap();
+    let _ = std::fs::remove_dir_all(ks.parent().unwrap());
+}

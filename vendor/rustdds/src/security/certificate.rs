@@ -127,6 +127,34 @@ impl Certificate {
       .map_err(|e| security_error(&format!("Signature verification failure: {e:?}")))
   }
 
+  /// BEVT patch (peers' certificate dates, issue 17): an error naming the subject and
+  /// the validity period when `now` is outside it (RFC 5280 4.1.2.5: both ends
+  /// inclusive). Upstream checked signatures only, so an expired or not-yet-valid
+  /// identity certificate of a peer authenticated.
+  pub fn verify_valid_at(&self, now: chrono::DateTime<chrono::Utc>) -> SecurityResult<()> {
+    let (not_before, not_after) = (
+      self.cert.validity_not_before(),
+      self.cert.validity_not_after(),
+    );
+    if now < not_before {
+      Err(security_error(&format!(
+        "The certificate of '{}' is not valid before {} (now {})",
+        self.subject_name.serialize(),
+        not_before.to_rfc3339(),
+        now.to_rfc3339()
+      )))
+    } else if now > not_after {
+      Err(security_error(&format!(
+        "The certificate of '{}' expired at {} (now {})",
+        self.subject_name.serialize(),
+        not_after.to_rfc3339(),
+        now.to_rfc3339()
+      )))
+    } else {
+      Ok(())
+    }
+  }
+
   // Verify that `self` was signed by `other` Certificate
   // e.g.
   // `someones_identity.verify_signed_by_certificate( certificate_authority )`
@@ -212,5 +240,16 @@ iHhbVPRB9Uxts9CwglxYgZoUdGUAxreYIIaLO4yLqw==
     let cert = Certificate::from_pem(cert_pem).unwrap();
 
     println!("{cert:?}");
+
+    // BEVT patch (peers' certificate dates, issue 17): valid 2023-07-23T08:28:36Z ..=
+    // 2033-07-21T08:28:36Z.
+    use chrono::TimeZone;
+    let at = |y, m, d| chrono::Utc.with_ymd_and_hms(y, m, d, 12, 0, 0).unwrap();
+    assert!(cert.verify_valid_at(at(2026, 11, 25)).is_ok());
+    let early = cert.verify_valid_at(at(2023, 7, 22)).unwrap_err().msg;
+    assert!(early.contains("not valid before 2023-07-23T08:28:36"), "{early}");
+    assert!(early.contains("CN=sros2CA"), "{early}");
+    let late = cert.verify_valid_at(at(2033, 7, 22)).unwrap_err().msg;
+    assert!(late.contains("expired at 2033-07-21T08:28:36"), "{late}");
   }
 }

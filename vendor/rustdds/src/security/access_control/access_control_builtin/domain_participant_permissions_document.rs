@@ -34,6 +34,52 @@ impl DomainParticipantPermissions {
       .find(|g| g.subject_name.matches(subject_name) && g.validity.contains(current_datetime))
   }
 
+  /// BEVT patch (expired permissions, issue 17): like [`Self::find_grant`], but when
+  /// no grant is valid says why: no grant for the subject, or the subject's grants
+  /// are outside their validity (upstream reported an expired grant as "subject
+  /// name not found").
+  pub fn find_grant_or_reason(
+    &self,
+    subject_name: &DistinguishedName,
+    current_datetime: &DateTime<Utc>,
+  ) -> Result<&Grant, String> {
+    if let Some(g) = self.find_grant(subject_name, current_datetime) {
+      return Ok(g);
+    }
+    let for_subject: Vec<&Grant> = self
+      .grants
+      .iter()
+      .filter(|g| g.subject_name.matches(subject_name))
+      .collect();
+    if for_subject.is_empty() {
+      return Err(format!(
+        "no grant for the subject name '{}' in the permissions document",
+        subject_name.serialize()
+      ));
+    }
+    let periods: Vec<String> = for_subject
+      .iter()
+      .map(|g| {
+        let state = if *current_datetime < g.validity.start {
+          "not yet valid"
+        } else {
+          "expired"
+        };
+        format!(
+          "{state}: valid from {} until {}",
+          g.validity.start.to_rfc3339(),
+          g.validity.end.to_rfc3339()
+        )
+      })
+      .collect();
+    Err(format!(
+      "the permissions for the subject name '{}' are not valid now ({}): {}",
+      subject_name.serialize(),
+      current_datetime.to_rfc3339(),
+      periods.join("; ")
+    ))
+  }
+
   pub fn from_xml(domain_participant_permissions_xml: &str) -> Result<Self, ConfigError> {
     let dpp: xml::DomainParticipantPermissionsDocument = serde_xml_rs::from_str(
       domain_participant_permissions_xml
@@ -789,5 +835,19 @@ mod tests {
     assert!(grant.is_some());
 
     println!("{grant:?}");
+
+    // BEVT patch (expired permissions, issue 17): the reason names the period.
+    let subject = DistinguishedName::parse("CN=some_subject").unwrap();
+    let after = chrono::Utc.with_ymd_and_hms(2020, 1, 1, 0, 0, 0).unwrap();
+    let reason = dpd.find_grant_or_reason(&subject, &after).unwrap_err();
+    assert!(reason.contains("expired") && reason.contains("2018-10-26T20:45:30"), "{reason}");
+    let before = chrono::Utc.with_ymd_and_hms(2012, 1, 1, 0, 0, 0).unwrap();
+    let reason = dpd.find_grant_or_reason(&subject, &before).unwrap_err();
+    assert!(reason.contains("not yet valid") && reason.contains("2013-10-26"), "{reason}");
+    let other = DistinguishedName::parse("CN=another").unwrap();
+    let reason = dpd.find_grant_or_reason(&other, &before).unwrap_err();
+    assert!(reason.contains("no grant for the subject name"), "{reason}");
+    let during = chrono::Utc.with_ymd_and_hms(2014, 11, 28, 0, 0, 0).unwrap();
+    assert!(dpd.find_grant_or_reason(&subject, &during).is_ok());
   }
 }

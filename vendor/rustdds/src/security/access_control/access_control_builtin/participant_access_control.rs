@@ -157,14 +157,15 @@ impl ParticipantAccessControl for AccessControlBuiltin {
       })
       .map(|cert| cert.subject_name().clone())?;
 
-    // Then verify that we have permissions for this subject name
-    if domain_participant_permissions
-      .find_grant(&subject_name, &Utc::now())
-      .is_none()
+    // Then verify that we have permissions for this subject name. BEVT patch
+    // (expired permissions, issue 17): say whether the grant is missing or out of
+    // its validity period.
+    if let Err(reason) =
+      domain_participant_permissions.find_grant_or_reason(&subject_name, &Utc::now())
     {
       Err(create_security_error_and_log!(
-        "The subject name '{}' from the ID certificate not found in the permissions document",
-        subject_name
+        "Local permissions refused: {}",
+        reason
       ))?;
     }
 
@@ -266,13 +267,12 @@ impl ParticipantAccessControl for AccessControlBuiltin {
 
     // Check the subject name in the identity certificate matches the one from the
     // permissions document.
-    if remote_domain_participant_permissions
-      .find_grant(remote_subject_name, &Utc::now())
-      .is_none()
+    if let Err(reason) =
+      remote_domain_participant_permissions.find_grant_or_reason(remote_subject_name, &Utc::now())
     {
       Err(create_security_error_and_log!(
-        "No valid grants with the subject name {:?} found",
-        remote_subject_name
+        "Remote permissions refused: {}",
+        reason
       ))?;
     }
 

@@ -534,6 +534,10 @@ impl Authentication for AuthenticationBuiltin {
 
     // Verify that 1's identity cert checks out against CA.
     cert1.verify_signed_by_certificate(&local_info.identity_ca)?;
+    // BEVT patch (peers' certificate dates, issue 17): and that it is valid now.
+    cert1
+      .verify_valid_at(chrono::Utc::now())
+      .map_err(|e| create_security_error_and_log!("Handshake request refused: {}", e.msg))?;
 
     // Verify that the remote GUID is as specified by the spec
     let remote_pdata =
@@ -724,6 +728,10 @@ impl Authentication for AuthenticationBuiltin {
 
         // Verify that 2's identity cert checks out against CA.
         cert2.verify_signed_by_certificate(&local_info.identity_ca)?;
+        // BEVT patch (peers' certificate dates, issue 17): and that it is valid now.
+        cert2
+          .verify_valid_at(chrono::Utc::now())
+          .map_err(|e| create_security_error_and_log!("Handshake reply refused: {}", e.msg))?;
 
         // Verify that the remote GUID is as specified by the spec.
         // Note that spec does say that this check needs to be done here. But it seems
