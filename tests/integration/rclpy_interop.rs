@@ -11,15 +11,13 @@
 
 use bevt_core::{BBox, TrackerConfig};
 use bevt_msgs::bevt::TrackStatus;
-use bevt_node::node::app::{NodeCore, NodeSettings};
+use bevt_node::node::app::NodeSettings;
 use bevt_node::node::param_services::NodeParams;
-use bevt_node::node::ros::{run, RosSettings};
+use bevt_node::node::ros::RosSettings;
 use bevt_node::node::sim::GroundStation;
 use serde_json::{json, Value};
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Child, ChildStdout, Command, Stdio};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 const TEST: &str = "rclpy_client_lists_sets_streams_and_receives_large_messages";
@@ -143,13 +141,16 @@ fn rclpy_client_lists_sets_streams_and_receives_large_messages() {
     .keys()
     .cloned()
     .collect();
-    let stop = Arc::new(AtomicBool::new(false));
-    let node = {
-        let (s, st) = (settings.clone(), stop.clone());
-        let config = TrackerConfig::default().validate().unwrap();
-        let core = NodeCore::new(config, NodeSettings::default());
-        std::thread::spawn(move || run(core, &s, st, |_| {}).unwrap())
-    };
+    // The node as its own process, as `ros2 run` starts it; it stops when its stdin closes.
+    let mut node = Command::new(env!("CARGO_BIN_EXE_bevt_node_under_test"))
+        .args(["--ros-args", "-p", "debug_image_rate_hz:=5.0"])
+        .env("ROS_DOMAIN_ID", settings.domain_id.to_string())
+        .env_remove("ROS_SECURITY_ENABLE")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .unwrap();
     let gs = GroundStation::new(&settings).unwrap();
 
     // The graph, as `ros2 node list` / `topic list` / `service list` see it.
@@ -307,6 +308,11 @@ fn rclpy_client_lists_sets_streams_and_receives_large_messages() {
     let after = peer.ask(json!({"cmd": "debug", "topic": "/debug_image"}))["received"].clone();
     assert_eq!(before, after, "debug images after the camera stopped");
 
-    stop.store(true, Ordering::Relaxed);
-    node.join().unwrap();
+    assert!(
+        node.try_wait().unwrap().is_none(),
+        "the node exited during the test"
+    );
+    drop(node.stdin.take());
+    let status = node.wait().unwrap();
+    assert!(status.success(), "the node's exit: {status}");
 }
