@@ -1,7 +1,8 @@
 //! The node against the real ROS 2 client library: rclpy over rcl and rmw_fastrtps_cpp
 //! (Fast DDS 3.2) from the PyPI ROS wheels in the project-local venv
 //! (`scripts/requirements-ros.txt`), driven by `tests/interop/rclpy_peer.py` as `ros2 param`,
-//! `ros2 topic` and a ROS 2 camera use it, with ROS 2's default discovery settings.
+//! `ros2 topic` and a ROS 2 camera use it, with ROS 2's default discovery settings, against
+//! the node as its own process (`bevt_node_under_test`, what `ros2 run` starts).
 //!
 //! Checked: the node, its topics and services in the ROS graph; `list_parameters` with
 //! depth 0 (what `ros2 param list` sends) returns every declared parameter; get and describe
