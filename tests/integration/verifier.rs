@@ -223,14 +223,9 @@ fn nanotrack_verifier_with_a_missing_head_is_an_error() {
     );
 }
 
-/// Stated behaviour with the verifier: the look-alike of `lost.rs` (the target's size, rim
-/// and colours, another texture; shown at (120, 250) while the target is hidden, frames
-/// 30–49) **is taken** (NanoTrack scores it like the target; without the verifier it is
-/// not, `lost.rs`), then **released**: the filter, frozen from the real target, finds it
-/// unconfident, the track is lost again after `lost_frames`, and the real target is
-/// re-acquired where it reappeared and kept to the end.
-#[test]
-fn nanotrack_verifier_takes_the_look_alike_then_releases_it_for_the_target() {
+/// The look-alike of `lost.rs` (the target's size, rim and colours, another texture; shown
+/// at (120, 250) while the target is hidden, frames 30–49) with the NanoTrack verifier.
+fn look_alike_run() -> (Vec<(bevt_core::TrackOutput, bevt_core::BBox)>, usize) {
     let seq = bevt_tests::scenes::with_look_alike();
     let mut cfg = TrackerConfig::default();
     cfg.redetection.verifier = VerifierKind::Nanotrack;
@@ -239,25 +234,48 @@ fn nanotrack_verifier_takes_the_look_alike_then_releases_it_for_the_target() {
     let r = bevt_tests::track_synthetic(&seq, cfg, seq.truth(0));
     let states: Vec<_> = r.iter().map(|(o, _)| o.state).collect();
     println!("{states:?}");
-    let reacq = |range: std::ops::Range<usize>| {
-        range
-            .filter(|&t| r[t - 1].0.state == TrackState::Reacquired)
-            .collect::<Vec<_>>()
-    };
-    let on_look_alike = |t: usize| {
-        let c = r[t - 1].0.bbox.center();
-        (c.x - 120.0).abs() < 20.0 && (c.y - 250.0).abs() < 20.0
-    };
-    let taken = reacq(30..50);
-    assert!(
-        taken.iter().any(|&t| on_look_alike(t)),
-        "look-alike not taken: {taken:?}"
-    );
-    let back = reacq(50..seq.frames)
-        .into_iter()
-        .find(|&t| !on_look_alike(t))
+    (r, seq.frames)
+}
+
+/// Frame `t` (1-based) reports a box on the look-alike.
+fn on_look_alike(r: &[(bevt_core::TrackOutput, bevt_core::BBox)], t: usize) -> bool {
+    let c = r[t - 1].0.bbox.center();
+    (c.x - 120.0).abs() < 20.0 && (c.y - 250.0).abs() < 20.0
+}
+
+/// What a ground station needs: whatever the tracker does while the target is hidden, the
+/// real target is re-acquired after it reappears (frame 50) and kept to the end.
+#[test]
+fn after_a_look_alike_the_target_is_reacquired_and_kept() {
+    let (r, frames) = look_alike_run();
+    let back = (50..=frames)
+        .find(|&t| r[t - 1].0.state == TrackState::Reacquired && !on_look_alike(&r, t))
         .expect("the target was never re-acquired");
     assert_kept_from(&r, back);
+}
+
+/// The wanted behaviour: the look-alike is never reported as the target (no `tracking` or
+/// `reacquired` frame with the box on it). Known defect, so this test is ignored until
+/// drift detection (issue 20) lands: NanoTrack's verifier scores the look-alike like the
+/// target, it is re-acquired at frame 45 and reported `tracking` on frames 46–49 before
+/// the filter, frozen from the real target, finds it unconfident and the track is lost
+/// again (`lost.rs`: without the verifier it is not taken). Run it with `--ignored`.
+#[test]
+#[ignore = "known defect: the NanoTrack verifier takes the look-alike (issue 20)"]
+fn the_look_alike_is_never_reported_as_the_target() {
+    let (r, frames) = look_alike_run();
+    let claimed: Vec<usize> = (1..=frames)
+        .filter(|&t| {
+            matches!(
+                r[t - 1].0.state,
+                TrackState::Tracking | TrackState::Reacquired
+            ) && on_look_alike(&r, t)
+        })
+        .collect();
+    assert!(
+        claimed.is_empty(),
+        "the look-alike was reported as the target on frames {claimed:?}"
+    );
 }
 
 /// Verifiers of one process share the optimised plans: a second verifier of the same files
