@@ -4,6 +4,7 @@
 //! `cargo bench -p bevt_core --bench stages`
 #![allow(missing_docs, clippy::unwrap_used, clippy::expect_used)]
 
+use bevt_core::consensus::{consensus_score, ConsensusNorm};
 use bevt_core::eval::synth::SynthParams;
 use bevt_core::features::colornames::{cell_colornames, CN_CHANNELS};
 use bevt_core::features::{FeatureExtractor, FeatureMap, Hog};
@@ -15,7 +16,6 @@ use bevt_core::filter::response::{fused_response, LayerSlot};
 use bevt_core::filter::shift::{apply_phase, shift_phase};
 use bevt_core::image::{Patch, Sampler};
 use bevt_core::scale_filter::ScaleFilter;
-use bevt_core::verify::{consensus_score, ConsensusNorm};
 use bevt_core::{BevtTracker, Frame, GridSize, PixelFormat, Size2, Tracker, TrackerConfig};
 use criterion::{criterion_group, criterion_main, Criterion};
 use rustfft::num_complex::Complex32;

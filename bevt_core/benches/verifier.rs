@@ -7,7 +7,7 @@
 //! `ORT_DYLIB_PATH=$(bash scripts/onnxruntime.sh) cargo bench -p bevt_core --features cnn --bench verifier`
 #![allow(missing_docs, clippy::unwrap_used, clippy::expect_used)]
 
-use bevt_core::redetect_nano::{NanoVerifier, CHANNELS, SEARCH_SIDE, TEMPLATE_SIDE};
+use bevt_core::redetect::nano::{NanoVerifier, CHANNELS, SEARCH_SIDE, TEMPLATE_SIDE};
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
 use std::time::Duration;

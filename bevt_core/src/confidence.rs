@@ -1,7 +1,7 @@
 //! Per-frame confidence: how sure the tracker is that its box is on the target, in `[0, 1]`,
 //! and the relative score that gates learning.
 //!
-//! The multi-frame consensus of [`crate::verify`] compares whole response maps and does
+//! The multi-frame consensus of [`crate::consensus`] compares whole response maps and does
 //! not separate good frames from lost ones (issue 8: ROC-AUC 0.47 on the dev set); peak
 //! based scores do. Two numbers come out of one frame's winning response:
 //!
@@ -21,7 +21,7 @@
 //! every confidence relative to a running level scored ROC-AUC 0.40–0.80 where the
 //! absolute `s` scores 0.94 (README "Confidence and lost state").
 //!
-//! `relative` drives the learning gate ([`crate::verify::LearningGate`]): a sudden drop
+//! `relative` drives the learning gate ([`crate::consensus::LearningGate`]): a sudden drop
 //! against the recent level (an occlusion) is what learning must not absorb, and a level
 //! that keeps adapting cannot lock the tracker out of learning after a slow change.
 //!
@@ -40,11 +40,11 @@ const MIN_REFERENCE: f32 = 1e-12;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ConfidenceMeasure {
-    /// Response peak relative to its running reference level.
+    /// `r`: the response peak over the initial filter's in-sample peak.
     Peak,
-    /// Peak-to-sidelobe ratio relative to its running reference level.
+    /// `q`: the peak-to-sidelobe ratio of the response.
     Psr,
-    /// Geometric mean of the two ratios.
+    /// `r·q`, their product (the default).
     PeakPsr,
 }
 

@@ -6,13 +6,13 @@
 //! is an enum, and its default is documented on the field.
 
 use crate::confidence::{ConfidenceMeasure, ConfidenceParams};
+use crate::consensus::{ConsensusNorm, GateParams, VerificationScore, VerifyParams};
 use crate::error::ConfigError;
 use crate::features::cnn_config::CnnConfig;
 use crate::filter::admm::{AdmmParams, PenaltyKind};
 use crate::redetect::RedetectParams;
 use crate::scale_filter::ScaleFilterParams;
 use crate::track_state::StateParams;
-use crate::verify::{ConsensusNorm, GateParams, VerificationScore, VerifyParams};
 use serde::{Deserialize, Serialize};
 
 /// Which features the tracker uses.
@@ -309,7 +309,8 @@ impl Default for VerificationConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ConfidenceConfig {
-    /// `peak`, `psr` or `peak_psr` (geometric mean), each relative to its running reference.
+    /// `peak_psr` (r·q), `peak` (r: peak over the initial filter's in-sample peak) or `psr`
+    /// (q: peak-to-sidelobe ratio); absolute, no running reference.
     pub measure: ConfidenceMeasure,
     /// Score at which the confidence is 0.5 (`peak_psr`: 5; `peak`: about 0.5; `psr`: about
     /// 8); confidence = score / (score + half_score).

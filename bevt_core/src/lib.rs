@@ -39,6 +39,7 @@
 
 pub mod confidence;
 pub mod config;
+pub mod consensus;
 pub mod error;
 pub mod eval;
 pub mod features;
@@ -47,12 +48,10 @@ pub mod filter;
 pub mod geometry;
 pub mod image;
 pub mod redetect;
-pub mod redetect_nano;
 pub mod scale;
 pub mod scale_filter;
 pub mod track_state;
 pub mod tracker;
-pub mod verify;
 
 pub use config::{TrackerConfig, TrackerSpec};
 pub use error::{ConfigError, TrackError};

@@ -9,6 +9,9 @@ use crate::confidence::{psr, ConfidenceModel, Measures};
 use crate::config::{
     FeatureKind, ScaleEstimator, TrackerConfig, TrackerSpec, TrainingSample, VerifierKind,
 };
+use crate::consensus::{
+    consensus_score, update_ideal, verdict, LearningGate, Verdict, VerificationScore,
+};
 use crate::error::ConfigError;
 use crate::error::TrackError;
 use crate::features::{FeatureExtractor, FeatureMap, Hog};
@@ -24,9 +27,6 @@ use crate::redetect::Verifier;
 use crate::scale::{scale_factors, scale_limits};
 use crate::scale_filter::ScaleFilter;
 use crate::track_state::{StateMachine, StateReason, TrackState};
-use crate::verify::{
-    consensus_score, update_ideal, verdict, LearningGate, Verdict, VerificationScore,
-};
 use rustfft::num_complex::Complex32;
 use serde::{Deserialize, Serialize};
 
@@ -467,7 +467,7 @@ impl BevtTracker {
         match r.verifier {
             VerifierKind::None => Ok(None),
             VerifierKind::Nanotrack => {
-                let v = crate::redetect_nano::NanoVerifier::new(
+                let v = crate::redetect::nano::NanoVerifier::new(
                     &r.verifier_backbone,
                     &r.verifier_head,
                 )?;
@@ -481,7 +481,7 @@ impl BevtTracker {
                     .cnn
                     .as_ref()
                     .map_or("", |c| c.runtime.as_str());
-                let v = crate::redetect_nano::NanoVerifier::new_ort(
+                let v = crate::redetect::nano::NanoVerifier::new_ort(
                     runtime,
                     &r.verifier_backbone,
                     &r.verifier_head,

@@ -307,7 +307,7 @@ pub mod vision_msgs {
     pub struct ObjectHypothesis {
         /// Class.
         pub class_id: String,
-        /// Score (the node puts the consensus score here).
+        /// Score (the node puts the track's confidence here).
         pub score: f64,
     }
     /// `vision_msgs/ObjectHypothesisWithPose`.
@@ -549,7 +549,8 @@ pub mod bevt {
         pub const STATE_IDLE: u8 = 0;
         /// Tracking; the frame was learned.
         pub const STATE_TRACKING: u8 = 1;
-        /// Tracking; verification rejected the frame.
+        /// Tracking; the learning gate did not learn the frame (by default on the
+        /// confidence's drop against its recent level, not on the consensus score).
         pub const STATE_LOW_CONSENSUS: u8 = 2;
         /// Target lost (or track dropped).
         pub const STATE_LOST: u8 = 3;

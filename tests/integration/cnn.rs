@@ -295,7 +295,7 @@ fn tiny_model_with_the_scale_filter_follows_a_growing_target() {
         cfg.detection.scale_estimator = ScaleEstimator::Filter;
         cfg.learning.training_sample = TrainingSample::Shifted;
         // Random weights give no meaningful confidence: learn every frame, never lost.
-        cfg.verification.score = bevt_core::verify::VerificationScore::Reference;
+        cfg.verification.score = bevt_core::consensus::VerificationScore::Reference;
         cfg.track_state.lost_threshold = 0.0;
         let mut t = BevtTracker::try_new(cfg.validate().unwrap()).unwrap();
         let f0 = seq.frame(0);
@@ -636,7 +636,7 @@ fn a_file_that_is_not_onnx_runtime_is_an_error_at_init() {
 /// far re-entry is re-acquired on the same frame as under tract (61, returning on 50).
 #[test]
 fn nanotrack_ort_verifier_matches_the_tract_one() {
-    use bevt_core::redetect_nano::NanoVerifier;
+    use bevt_core::redetect::nano::NanoVerifier;
     let Some(rt) = runtime("nanotrack_ort_verifier_matches_the_tract_one") else {
         return;
     };

@@ -89,8 +89,8 @@ fn recovers_from_a_perturbed_initial_box() {
 
 #[test]
 fn every_penalty_and_norm_tracks_the_synthetic_target() {
+    use bevt_core::consensus::ConsensusNorm;
     use bevt_core::filter::admm::PenaltyKind;
-    use bevt_core::verify::ConsensusNorm;
     let seq = SynthParams {
         frames: 40,
         ..moving_scaling()

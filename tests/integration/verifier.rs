@@ -4,7 +4,7 @@
 //! lost-state scenes of `bevt_tests::scenes`.
 
 use bevt_core::config::VerifierKind;
-use bevt_core::redetect_nano::{NanoError, NanoVerifier, CHANNELS, SEARCH_CELLS};
+use bevt_core::redetect::nano::{NanoError, NanoVerifier, CHANNELS, SEARCH_CELLS};
 use bevt_core::{BevtTracker, Frame, PixelFormat, TrackState, Tracker, TrackerConfig};
 use std::path::PathBuf;
 

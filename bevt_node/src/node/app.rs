@@ -644,9 +644,11 @@ impl NodeCore {
         None
     }
 
-    /// The newest frame with the current box drawn (green: learned, yellow: low consensus)
-    /// and a consensus bar above it (its length is the consensus score × box width), in the
-    /// camera's own encoding. `None` before the first usable frame.
+    /// The newest frame with the current box drawn (green: the frame was learned, yellow:
+    /// not learned, i.e. `STATE_LOW_CONSENSUS` or a state that does not learn) and a bar above
+    /// it whose length is the consensus score C × box width (C is reported; by default the
+    /// learning gate and the track state use the confidence), in the camera's own encoding.
+    /// `None` before the first usable frame.
     pub fn debug_image(&self) -> Option<Image> {
         let f = self.buffer.back()?;
         let (encoding, bpp) = match f.format {

@@ -55,9 +55,9 @@ pub const MAX_MODEL_BYTES: u64 = 64 << 20;
 
 /// The embedded NanoTrack v2 backbone (`models/nanotrack/nanotrackv2_backbone_sim_dyn.onnx`).
 static EMBEDDED_BACKBONE: &[u8] =
-    include_bytes!("../../models/nanotrack/nanotrackv2_backbone_sim_dyn.onnx");
+    include_bytes!("../../../models/nanotrack/nanotrackv2_backbone_sim_dyn.onnx");
 /// The embedded NanoTrack v2 head (`models/nanotrack/nanotrackv2_head_sim.onnx`).
-static EMBEDDED_HEAD: &[u8] = include_bytes!("../../models/nanotrack/nanotrackv2_head_sim.onnx");
+static EMBEDDED_HEAD: &[u8] = include_bytes!("../../../models/nanotrack/nanotrackv2_head_sim.onnx");
 
 /// Name of an embedded model in messages.
 const EMBEDDED: &str = "<embedded NanoTrack v2>";

@@ -28,6 +28,8 @@
 //! dropped. The track is taken back only when one candidate has been confident for
 //! `reacquire_frames` frames in a row, so a brief look-alike does not steal the track.
 
+pub mod nano;
+
 use crate::error::TrackError;
 use crate::geometry::Point2;
 use crate::image::Frame;
