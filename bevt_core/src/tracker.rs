@@ -831,7 +831,7 @@ impl Tracker for BevtTracker {
         st.ideal_response();
         let initial_peak = st.m_ideal.iter().copied().fold(0.0f32, f32::max);
         st.confidence = ConfidenceModel::new(self.spec.confidence, initial_peak);
-        lost::observe(&mut st, frame, true);
+        lost::start(&mut st, frame);
         self.state = Some(st);
         Ok(())
     }
@@ -921,12 +921,7 @@ impl Tracker for BevtTracker {
         let warming_up = st.confidence.warming_up();
         let before = st.states.state();
         let (state, reason) = st.states.track(confidence);
-        let was_confident = matches!(before, TrackState::Tracking | TrackState::Reacquired);
-        if state != TrackState::Tracking && was_confident {
-            lost::snapshot(st);
-        }
-        if state == TrackState::Lost {
-            lost::enter(st, &self.spec);
+        if lost::after_decision(st, frame, &self.spec, before, state) {
             return Ok(Self::output_at(
                 st,
                 st.pos,
@@ -971,9 +966,6 @@ impl Tracker for BevtTracker {
                 true
             }
         };
-        if state == TrackState::Tracking {
-            lost::observe(st, frame, false);
-        }
         let (pos, scale) = (st.pos, st.scale);
         Ok(Self::output_at(
             st,

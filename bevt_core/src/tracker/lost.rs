@@ -1,5 +1,16 @@
 //! The lost state of [`super::BevtTracker`]: the model frozen at the last confident frame,
 //! and the bounded re-detection search of [`crate::redetect`] on every lost frame.
+//!
+//! This module owns everything about being lost; the tracker calls it once per frame:
+//!
+//! - [`start`] when a track is initialised (the re-detection template starts from the box);
+//! - [`after_decision`] on a tracked frame, right after the state machine decided: it keeps
+//!   the template fresh on confident frames, freezes the model when the track stops being
+//!   confident, and enters the search when the track is lost;
+//! - [`search`] instead of tracking, on every frame while lost.
+//!
+//! It reads the tracker's geometry and position; only the freeze and the entry into the
+//! search swap the tracker's filter, appearance model and ideal response.
 
 use super::{BevtTracker, State};
 use crate::confidence::{psr, Measures};
@@ -11,6 +22,7 @@ use crate::redetect::{
     candidate_threshold, context_side, propose, Appearance, Candidate, CandidateTracker,
     ProposalScratch, RedetectParams, SearchPlan, Verifier, VerifierHit,
 };
+use crate::track_state::TrackState;
 use crate::tracker::TrackOutput;
 use rustfft::num_complex::Complex32;
 
@@ -58,16 +70,51 @@ fn template_side(st: &State, scale: f32) -> f32 {
     (st.geo.base_target.w * st.geo.base_target.h).sqrt() * scale
 }
 
+/// A new track on `frame`: the re-detection template is the initial box.
+pub(super) fn start(st: &mut State, frame: &Frame<'_>) {
+    observe(st, frame, true);
+}
+
+/// A tracked frame whose state the state machine has just decided (`before` → `state`).
+/// Returns `true` when the track is now lost: the tracker then reports the frame and
+/// stops (no learning); [`search`] takes the next frames.
+///
+/// The template is blended before the frame is learned, which leaves it as it was when it
+/// was blended after: learning changes the filter, not the position, scale or frame.
+pub(super) fn after_decision(
+    st: &mut State,
+    frame: &Frame<'_>,
+    spec: &TrackerSpec,
+    before: TrackState,
+    state: TrackState,
+) -> bool {
+    let was_confident = matches!(before, TrackState::Tracking | TrackState::Reacquired);
+    if state != TrackState::Tracking && was_confident {
+        snapshot(st);
+    }
+    match state {
+        TrackState::Lost => {
+            enter(st, spec);
+            true
+        }
+        TrackState::Tracking => {
+            observe(st, frame, false);
+            false
+        }
+        _ => false,
+    }
+}
+
 /// A confident frame (or the initial one, `first`): blends the target into the
 /// re-detection template.
-pub(super) fn observe(st: &mut State, frame: &Frame<'_>, first: bool) {
+fn observe(st: &mut State, frame: &Frame<'_>, first: bool) {
     let side = template_side(st, st.scale);
     let rate = if first { 1.0 } else { APPEARANCE_RATE };
     st.lost.appearance.observe(frame, st.pos, side, rate);
 }
 
 /// Saves the model before the first unconfident frame can be learned.
-pub(super) fn snapshot(st: &mut State) {
+fn snapshot(st: &mut State) {
     let l = &mut st.lost;
     l.g_f.clone_from(&st.g_f);
     l.model_xf.clone_from(&st.model_xf);
@@ -79,7 +126,7 @@ pub(super) fn snapshot(st: &mut State) {
 }
 
 /// Enters the lost state: restores the last confident model and position, plans the search.
-pub(super) fn enter(st: &mut State, spec: &TrackerSpec) {
+fn enter(st: &mut State, spec: &TrackerSpec) {
     let l = &mut st.lost;
     if l.saved {
         std::mem::swap(&mut st.g_f, &mut l.g_f);
