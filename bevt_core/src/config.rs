@@ -15,6 +15,9 @@ use crate::scale_filter::ScaleFilterParams;
 use crate::track_state::StateParams;
 use serde::{Deserialize, Serialize};
 
+pub mod keys;
+pub use keys::{live_keys, KeySpec, Kind, Range, TRACKER_KEYS};
+
 /// Which features the tracker uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -484,34 +487,10 @@ impl Default for TrackerConfig {
     }
 }
 
-/// The keys a running tracker takes at once ([`crate::BevtTracker::retune`]): thresholds,
-/// rates and per-frame budgets, read on every frame. Every other key shapes what is built
-/// at initialisation (window, features, filter, scales, buffers) and takes effect only for
-/// a new tracker.
-pub const LIVE_KEYS: &[&str] = &[
-    "learning.rate",
-    "learning.reinforced_rate",
-    "verification.enabled",
-    "verification.threshold_low",
-    "verification.threshold_high",
-    "verification.response_model_rate",
-    "verification.gate_low",
-    "verification.gate_high",
-    "verification.max_consecutive_skips",
-    "confidence.half_score",
-    "confidence.reference_rate",
-    "track_state.lost_threshold",
-    "track_state.lost_frames",
-    "redetection.windows_per_frame",
-    "redetection.reacquire_threshold",
-    "redetection.reacquire_frames",
-    "redetection.reacquire_relative",
-    "detection.newton_iterations",
-];
-
 impl TrackerConfig {
-    /// A copy of `self` with the [`LIVE_KEYS`] of `other`: equal to `other` exactly when
-    /// the two differ in live keys only.
+    /// A copy of `self` with the live keys ([`keys::live_keys`]) of `other`: equal to
+    /// `other` exactly when the two differ in live keys only. (A test checks that this copies
+    /// exactly the keys the table marks live.)
     pub fn with_live_keys_of(&self, other: &TrackerConfig) -> TrackerConfig {
         let mut c = self.clone();
         c.learning.rate = other.learning.rate;
@@ -537,59 +516,6 @@ impl TrackerConfig {
     }
 }
 
-/// The documentation of every configuration key, by dotted name (`window.padding`): the
-/// doc comment of its field in this file (for `ros2 param describe` on the node). Keys of
-/// sections defined elsewhere (`features.cnn`) get the section's comment.
-pub fn key_docs() -> Vec<(String, String)> {
-    const SOURCE: &str = include_str!("config.rs");
-    /// A field: name, type, doc.
-    type Field<'a> = (&'a str, &'a str, String);
-    // struct name -> fields, in file order.
-    let mut structs: Vec<(&str, Vec<Field<'_>>)> = Vec::new();
-    let mut current: Option<usize> = None;
-    let mut doc: Vec<&str> = Vec::new();
-    for line in SOURCE.lines() {
-        let t = line.trim();
-        if let Some(name) = t
-            .strip_prefix("pub struct ")
-            .and_then(|r| r.strip_suffix(" {"))
-        {
-            structs.push((name, Vec::new()));
-            current = Some(structs.len() - 1);
-            doc.clear();
-        } else if line.starts_with('}') {
-            current = None;
-            doc.clear();
-        } else if let Some(d) = t.strip_prefix("///") {
-            doc.push(d.trim());
-        } else if t.starts_with("#[") {
-            // attributes between a doc comment and its field
-        } else if let (Some(i), Some((field, ty))) = (
-            current,
-            t.strip_prefix("pub ").and_then(|r| r.split_once(':')),
-        ) {
-            let ty = ty.trim().trim_end_matches(',');
-            structs[i].1.push((field, ty, doc.join(" ")));
-            doc.clear();
-        } else {
-            doc.clear();
-        }
-    }
-    let fields_of = |name: &str| structs.iter().find(|(n, _)| *n == name).map(|(_, f)| f);
-    let mut out = Vec::new();
-    for (section, ty, doc) in fields_of("TrackerConfig").into_iter().flatten() {
-        match fields_of(ty) {
-            Some(fields) => {
-                for (field, _, d) in fields {
-                    out.push((format!("{section}.{field}"), d.clone()));
-                }
-            }
-            None => out.push((section.to_string(), doc.clone())),
-        }
-    }
-    out
-}
-
 /// A validated configuration: what the tracker is built from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrackerSpec {
@@ -611,26 +537,11 @@ pub struct TrackerSpec {
     pub scale_filter: ScaleFilterParams,
 }
 
-/// Largest number of re-detection scales.
-const MAX_REDETECT_SCALES: usize = 8;
-/// Largest re-detection budget, windows per lost frame.
-const MAX_WINDOWS_PER_FRAME: usize = 256;
-/// Largest gate threshold, fraction of the reference level.
-const MAX_GATE: f32 = 10.0;
-/// Largest `confidence.half_score`.
-const MAX_HALF_SCORE: f32 = 1e6;
-/// Largest frame count of the state and confidence windows.
-const MAX_FRAMES_KEY: usize = 10_000;
-
-fn unit(v: f32) -> bool {
-    v.is_finite() && (0.0..=1.0).contains(&v)
-}
-
 fn check(
     ok: bool,
     field: &'static str,
     value: impl ToString,
-    expected: &'static str,
+    expected: &str,
 ) -> Result<(), ConfigError> {
     if ok {
         Ok(())
@@ -638,55 +549,45 @@ fn check(
         Err(ConfigError::OutOfRange {
             field,
             value: value.to_string(),
-            expected,
+            expected: expected.to_string(),
         })
     }
 }
 
-/// Largest `window.search_area_scale` (ref 5).
-const MAX_SEARCH_AREA_SCALE: f32 = 10.0;
-/// Largest `window.padding` (ref 1.2).
-const MAX_PADDING: f32 = 3.0;
+/// The table's range check of an integer key.
+fn int_key(name: &str, v: usize) -> Result<(), ConfigError> {
+    keys::spec(name).check_int(v)
+}
+
+/// The table's range check of a real key.
+fn float_key(name: &str, v: f32) -> Result<(), ConfigError> {
+    keys::spec(name).check_float(v)
+}
+
+/// A constraint between keys (code: the table states it only in words): `name` is
+/// refused with the table's words for it.
+fn cross_key(ok: bool, name: &str, value: impl ToString) -> Result<(), ConfigError> {
+    let k = keys::spec(name);
+    check(ok, k.name, value, k.cross)
+}
+
 /// Largest feature grid side, cells (ref 60).
 const MAX_GRID_SIDE: usize = 128;
 /// Largest patch side, pixels (ref 240).
 const MAX_PATCH_SIDE: usize = 512;
 /// Most patch pixels sampled per frame over all scales (ref 5 · 240² ≈ 0.29 M).
 const MAX_PATCH_PIXELS: usize = 2 << 20;
-/// Most ADMM iterations per training (ref 3); each costs FFTs of every channel.
-const MAX_ADMM_ITERATIONS: usize = 20;
-/// Largest `admm.mu_init`, `admm.lambda` and penalty-window value.
-const MAX_ADMM_VALUE: f32 = 1e6;
-/// Largest `admm.mu_max` (ref 1e4).
-const MAX_ADMM_MU: f32 = 1e9;
-/// Largest `admm.beta` (ref 20).
-const MAX_ADMM_BETA: f32 = 1000.0;
-/// Most Newton iterations of the sub-cell peak (ref 50).
-const MAX_NEWTON_ITERATIONS: usize = 100;
-
-fn finite_pos(v: f32) -> bool {
-    v.is_finite() && v > 0.0
-}
 
 impl TrackerConfig {
-    /// Checks every field once and derives the solver parameters.
+    /// Checks every field once (the ranges of [`TRACKER_KEYS`], then the constraints
+    /// between keys) and derives the solver parameters.
     ///
     /// # Errors
     /// [`ConfigError`] naming the first offending field.
     pub fn validate(&self) -> Result<TrackerSpec, ConfigError> {
         let f = &self.features;
-        check(
-            (1..=16).contains(&f.hog_cell_size),
-            "features.hog_cell_size",
-            f.hog_cell_size,
-            "1..=16 pixels",
-        )?;
-        check(
-            f.gain.is_finite() && f.gain > 0.0 && f.gain <= 1e4,
-            "features.gain",
-            f.gain,
-            "(0, 1e4]",
-        )?;
+        int_key("features.hog_cell_size", f.hog_cell_size)?;
+        float_key("features.gain", f.gain)?;
         if f.kind == FeatureKind::Cnn {
             f.cnn
                 .as_ref()
@@ -699,376 +600,132 @@ impl TrackerConfig {
         }
         let w = &self.window;
         // Work per frame grows with search_area_scale² (frame pixels read per scale).
-        check(
-            (1.0..=MAX_SEARCH_AREA_SCALE).contains(&w.search_area_scale),
-            "window.search_area_scale",
-            w.search_area_scale,
-            "1..=10",
-        )?;
-        check(
-            (1.0..=MAX_PADDING).contains(&w.padding),
-            "window.padding",
-            w.padding,
-            "1..=3",
-        )?;
-        check(
-            finite_pos(w.filter_max_area)
-                && w.filter_max_area >= 16.0
-                && w.filter_max_area <= 65536.0,
-            "window.filter_max_area",
-            w.filter_max_area,
-            "16..=65536 cells²",
-        )?;
-        check(
-            finite_pos(w.cell_selection_thresh) && w.cell_selection_thresh <= 1.0,
-            "window.cell_selection_thresh",
-            w.cell_selection_thresh,
-            "(0, 1]",
-        )?;
-        check(
-            finite_pos(w.output_sigma_factor) && w.output_sigma_factor <= 1.0,
-            "window.output_sigma_factor",
-            w.output_sigma_factor,
-            "(0, 1]",
-        )?;
+        float_key("window.search_area_scale", w.search_area_scale)?;
+        float_key("window.padding", w.padding)?;
+        float_key("window.filter_max_area", w.filter_max_area)?;
+        float_key("window.cell_selection_thresh", w.cell_selection_thresh)?;
+        float_key("window.output_sigma_factor", w.output_sigma_factor)?;
         // Memory and work of one frame: the feature grid is at most
         // round(sqrt(filter_max_area) · padding) cells a side, the patch that many cells of
         // hog_cell_size pixels, and one patch is sampled per scale.
         let grid_side = (w.filter_max_area.sqrt() * w.padding).round() + 1.0;
-        check(
+        cross_key(
             grid_side <= MAX_GRID_SIDE as f32,
             "window.filter_max_area",
             format!(
                 "{} (grid side sqrt(filter_max_area) · padding = {grid_side} cells)",
                 w.filter_max_area
             ),
-            "sqrt(window.filter_max_area) · window.padding <= 128 cells",
         )?;
         let patch_side = grid_side * f.hog_cell_size as f32;
-        check(
+        cross_key(
             patch_side <= MAX_PATCH_SIDE as f32,
             "features.hog_cell_size",
             format!(
                 "{} (patch side grid side · hog_cell_size = {patch_side} px)",
                 f.hog_cell_size
             ),
-            "grid side (sqrt(window.filter_max_area) · window.padding) · features.hog_cell_size <= 512 px",
         )?;
         let patch_pixels = patch_side * patch_side * self.detection.number_of_scales as f32;
-        check(
+        cross_key(
             patch_pixels <= MAX_PATCH_PIXELS as f32,
             "detection.number_of_scales",
             format!(
                 "{} ({patch_pixels} patch pixels per frame)",
                 self.detection.number_of_scales
             ),
-            "number_of_scales · patch side² <= 2 M pixels per frame",
         )?;
         let a = &self.admm;
-        check(
-            (1..=MAX_ADMM_ITERATIONS).contains(&a.iterations),
-            "admm.iterations",
-            a.iterations,
-            "1..=20",
-        )?;
-        check(
-            finite_pos(a.mu_init) && a.mu_init <= MAX_ADMM_VALUE,
-            "admm.mu_init",
-            a.mu_init,
-            "(0, 1e6]",
-        )?;
-        check(
-            (1.0..=MAX_ADMM_BETA).contains(&a.beta),
-            "admm.beta",
-            a.beta,
-            "1..=1000",
-        )?;
-        check(
-            finite_pos(a.mu_max) && a.mu_max >= a.mu_init && a.mu_max <= MAX_ADMM_MU,
-            "admm.mu_max",
-            a.mu_max,
-            "admm.mu_init..=1e9",
-        )?;
-        check(
-            (0.0..=MAX_ADMM_VALUE).contains(&a.lambda),
-            "admm.lambda",
-            a.lambda,
-            "0..=1e6",
-        )?;
-        check(
-            (0.0..=MAX_ADMM_VALUE).contains(&a.reg_window_min),
-            "admm.reg_window_min",
-            a.reg_window_min,
-            "0..=1e6",
-        )?;
-        check(
-            a.reg_window_edge >= a.reg_window_min && a.reg_window_edge <= MAX_ADMM_VALUE,
+        int_key("admm.iterations", a.iterations)?;
+        float_key("admm.mu_init", a.mu_init)?;
+        float_key("admm.beta", a.beta)?;
+        float_key("admm.mu_max", a.mu_max)?;
+        cross_key(a.mu_max >= a.mu_init, "admm.mu_max", a.mu_max)?;
+        float_key("admm.lambda", a.lambda)?;
+        float_key("admm.reg_window_min", a.reg_window_min)?;
+        float_key("admm.reg_window_edge", a.reg_window_edge)?;
+        cross_key(
+            a.reg_window_edge >= a.reg_window_min,
             "admm.reg_window_edge",
             a.reg_window_edge,
-            "admm.reg_window_min..=1e6",
         )?;
-        check(
-            a.spatial_weight.is_finite() && a.spatial_weight >= 0.0 && a.spatial_weight <= 1e6,
-            "admm.spatial_weight",
-            a.spatial_weight,
-            "[0, 1e6]",
-        )?;
-        check(
-            a.temporal.is_finite() && a.temporal >= 0.0 && a.temporal <= MAX_ADMM_VALUE,
-            "admm.temporal",
-            a.temporal,
-            "[0, 1e6]",
-        )?;
+        float_key("admm.spatial_weight", a.spatial_weight)?;
+        float_key("admm.temporal", a.temporal)?;
         let d = &self.detection;
-        check(
-            d.number_of_scales >= 1 && d.number_of_scales <= 33,
-            "detection.number_of_scales",
-            d.number_of_scales,
-            "1..=33",
-        )?;
-        check(
-            d.scale_step.is_finite() && d.scale_step > 1.0 && d.scale_step < 2.0,
-            "detection.scale_step",
-            d.scale_step,
-            "(1, 2)",
-        )?;
+        int_key("detection.number_of_scales", d.number_of_scales)?;
+        float_key("detection.scale_step", d.scale_step)?;
         // Each Newton iteration evaluates the response spectrum once (O(grid cells)).
-        check(
-            d.newton_iterations <= MAX_NEWTON_ITERATIONS,
-            "detection.newton_iterations",
-            d.newton_iterations,
-            "0..=100",
-        )?;
-        check(
-            d.scale_penalty.is_finite() && d.scale_penalty > 0.0 && d.scale_penalty <= 1.0,
-            "detection.scale_penalty",
-            d.scale_penalty,
-            "(0, 1]",
-        )?;
+        int_key("detection.newton_iterations", d.newton_iterations)?;
+        float_key("detection.scale_penalty", d.scale_penalty)?;
         let sf = &self.scale_filter;
-        check(
-            (3..=65).contains(&sf.scales),
-            "scale_filter.scales",
-            sf.scales,
-            "3..=65",
-        )?;
-        check(
-            sf.interpolated_scales >= sf.scales && sf.interpolated_scales <= 257,
+        int_key("scale_filter.scales", sf.scales)?;
+        int_key("scale_filter.interpolated_scales", sf.interpolated_scales)?;
+        cross_key(
+            sf.interpolated_scales >= sf.scales,
             "scale_filter.interpolated_scales",
             sf.interpolated_scales,
-            "scale_filter.scales..=257",
         )?;
-        check(
-            sf.step.is_finite() && sf.step > 1.0 && sf.step < 1.5,
-            "scale_filter.step",
-            sf.step,
-            "(1, 1.5)",
-        )?;
-        check(
-            sf.learning_rate.is_finite() && sf.learning_rate > 0.0 && sf.learning_rate <= 1.0,
-            "scale_filter.learning_rate",
-            sf.learning_rate,
-            "(0, 1]",
-        )?;
-        check(
-            finite_pos(sf.sigma_factor) && sf.sigma_factor <= 10.0,
-            "scale_filter.sigma_factor",
-            sf.sigma_factor,
-            "(0, 10]",
-        )?;
-        check(
-            sf.lambda.is_finite() && sf.lambda >= 0.0,
-            "scale_filter.lambda",
-            sf.lambda,
-            ">= 0",
-        )?;
-        check(
-            (1..=16).contains(&sf.cell_size),
-            "scale_filter.cell_size",
-            sf.cell_size,
-            "1..=16 pixels",
-        )?;
-        check(
-            sf.sample_side >= 2 * sf.cell_size && sf.sample_side <= 256,
+        float_key("scale_filter.step", sf.step)?;
+        float_key("scale_filter.learning_rate", sf.learning_rate)?;
+        float_key("scale_filter.sigma_factor", sf.sigma_factor)?;
+        float_key("scale_filter.lambda", sf.lambda)?;
+        int_key("scale_filter.cell_size", sf.cell_size)?;
+        int_key("scale_filter.sample_side", sf.sample_side)?;
+        cross_key(
+            sf.sample_side >= 2 * sf.cell_size,
             "scale_filter.sample_side",
             sf.sample_side,
-            "2·scale_filter.cell_size..=256 pixels",
         )?;
-        check(
-            sf.padding.is_finite() && (1.0..=4.0).contains(&sf.padding),
-            "scale_filter.padding",
-            sf.padding,
-            "[1, 4]",
-        )?;
+        float_key("scale_filter.padding", sf.padding)?;
         let l = &self.learning;
-        check(
-            l.rate.is_finite() && (0.0..=1.0).contains(&l.rate),
-            "learning.rate",
-            l.rate,
-            "[0, 1]",
-        )?;
-        check(
-            l.reinforced_rate.is_finite() && (0.0..=1.0).contains(&l.reinforced_rate),
-            "learning.reinforced_rate",
-            l.reinforced_rate,
-            "[0, 1]",
-        )?;
+        float_key("learning.rate", l.rate)?;
+        float_key("learning.reinforced_rate", l.reinforced_rate)?;
         let v = &self.verification;
-        check(
-            v.threshold_low.is_finite() && (0.0..=1.0).contains(&v.threshold_low),
-            "verification.threshold_low",
-            v.threshold_low,
-            "[0, 1]",
-        )?;
-        check(
-            v.threshold_high.is_finite() && (0.0..=1.0).contains(&v.threshold_high),
-            "verification.threshold_high",
-            v.threshold_high,
-            "[0, 1]",
-        )?;
+        float_key("verification.threshold_low", v.threshold_low)?;
+        float_key("verification.threshold_high", v.threshold_high)?;
         if v.threshold_high < v.threshold_low {
             return Err(ConfigError::Inconsistent(format!(
                 "verification.threshold_high ({}) is below threshold_low ({})",
                 v.threshold_high, v.threshold_low
             )));
         }
-        check(
-            v.response_model_rate.is_finite() && (0.0..=1.0).contains(&v.response_model_rate),
-            "verification.response_model_rate",
-            v.response_model_rate,
-            "[0, 1]",
-        )?;
-        check(
-            v.gate_low.is_finite() && (0.0..=MAX_GATE).contains(&v.gate_low),
-            "verification.gate_low",
-            v.gate_low,
-            "[0, 10] (fraction of the reference level)",
-        )?;
-        check(
-            v.gate_high.is_finite() && v.gate_high >= v.gate_low && v.gate_high <= MAX_GATE,
+        float_key("verification.response_model_rate", v.response_model_rate)?;
+        float_key("verification.gate_low", v.gate_low)?;
+        float_key("verification.gate_high", v.gate_high)?;
+        cross_key(
+            v.gate_high >= v.gate_low,
             "verification.gate_high",
             v.gate_high,
-            "[verification.gate_low, 10]",
         )?;
-        check(
-            v.max_consecutive_skips <= MAX_FRAMES_KEY,
+        int_key(
             "verification.max_consecutive_skips",
             v.max_consecutive_skips,
-            "0..=10000 frames",
         )?;
         let c = &self.confidence;
-        check(
-            (1..=MAX_FRAMES_KEY).contains(&c.warmup_frames),
-            "confidence.warmup_frames",
-            c.warmup_frames,
-            "1..=10000 frames",
-        )?;
-        check(
-            unit(c.reference_rate),
-            "confidence.reference_rate",
-            c.reference_rate,
-            "[0, 1] per frame",
-        )?;
-        check(
-            c.half_score.is_finite() && c.half_score > 0.0 && c.half_score <= MAX_HALF_SCORE,
-            "confidence.half_score",
-            c.half_score,
-            "(0, 1e6]",
-        )?;
-        check(
-            c.psr_exclusion_cells <= 64,
-            "confidence.psr_exclusion_cells",
-            c.psr_exclusion_cells,
-            "0..=64 cells",
-        )?;
+        int_key("confidence.warmup_frames", c.warmup_frames)?;
+        float_key("confidence.reference_rate", c.reference_rate)?;
+        float_key("confidence.half_score", c.half_score)?;
+        int_key("confidence.psr_exclusion_cells", c.psr_exclusion_cells)?;
         let t = &self.track_state;
-        check(
-            unit(t.lost_threshold),
-            "track_state.lost_threshold",
-            t.lost_threshold,
-            "[0, 1]",
-        )?;
-        check(
-            (1..=MAX_FRAMES_KEY).contains(&t.lost_frames),
-            "track_state.lost_frames",
-            t.lost_frames,
-            "1..=10000 frames",
-        )?;
+        float_key("track_state.lost_threshold", t.lost_threshold)?;
+        int_key("track_state.lost_frames", t.lost_frames)?;
         let r = &self.redetection;
-        check(
-            (1..=MAX_WINDOWS_PER_FRAME).contains(&r.windows_per_frame),
-            "redetection.windows_per_frame",
-            r.windows_per_frame,
-            "1..=256 windows",
-        )?;
-        check(
-            !r.scales.is_empty()
-                && r.scales.len() <= MAX_REDETECT_SCALES
-                && r.scales
-                    .iter()
-                    .all(|s| s.is_finite() && (0.25..=4.0).contains(s)),
-            "redetection.scales",
-            format!("{:?}", r.scales),
-            "1 to 8 factors in [0.25, 4]",
-        )?;
-        check(
-            r.tile_stride.is_finite() && (0.1..=1.0).contains(&r.tile_stride),
-            "redetection.tile_stride",
-            r.tile_stride,
-            "[0.1, 1] window sides",
-        )?;
-        check(
-            unit(r.reacquire_threshold),
-            "redetection.reacquire_threshold",
-            r.reacquire_threshold,
-            "[0, 1]",
-        )?;
-        check(
-            unit(r.reacquire_relative),
-            "redetection.reacquire_relative",
-            r.reacquire_relative,
-            "[0, 1]",
-        )?;
-        check(
-            (1..=MAX_FRAMES_KEY).contains(&r.reacquire_frames),
-            "redetection.reacquire_frames",
-            r.reacquire_frames,
-            "1..=10000 frames",
-        )?;
-        check(
+        int_key("redetection.windows_per_frame", r.windows_per_frame)?;
+        keys::spec("redetection.scales").check_list(&r.scales)?;
+        float_key("redetection.tile_stride", r.tile_stride)?;
+        float_key("redetection.reacquire_threshold", r.reacquire_threshold)?;
+        float_key("redetection.reacquire_relative", r.reacquire_relative)?;
+        int_key("redetection.reacquire_frames", r.reacquire_frames)?;
+        int_key("redetection.proposals", r.proposals)?;
+        cross_key(
             r.proposals <= r.windows_per_frame,
             "redetection.proposals",
             r.proposals,
-            "0..=windows_per_frame",
         )?;
-        check(
-            (1..=MAX_WINDOWS_PER_FRAME).contains(&r.verifier_windows),
-            "redetection.verifier_windows",
-            r.verifier_windows,
-            "1..=256 passes",
-        )?;
-        check(
-            !r.verifier_scales.is_empty()
-                && r.verifier_scales.len() <= MAX_REDETECT_SCALES
-                && r.verifier_scales
-                    .iter()
-                    .all(|s| s.is_finite() && (0.25..=4.0).contains(s)),
-            "redetection.verifier_scales",
-            format!("{:?}", r.verifier_scales),
-            "1 to 8 factors in [0.25, 4]",
-        )?;
-        check(
-            r.verifier_threshold.is_finite() && r.verifier_threshold.abs() <= 100.0,
-            "redetection.verifier_threshold",
-            r.verifier_threshold,
-            "a logit margin in [-100, 100]",
-        )?;
-        check(
-            (1..=256).contains(&self.threads),
-            "threads",
-            self.threads,
-            "1..=256",
-        )?;
+        int_key("redetection.verifier_windows", r.verifier_windows)?;
+        keys::spec("redetection.verifier_scales").check_list(&r.verifier_scales)?;
+        float_key("redetection.verifier_threshold", r.verifier_threshold)?;
+        int_key("threads", self.threads)?;
         Ok(TrackerSpec {
             config: self.clone(),
             admm: AdmmParams {
@@ -1135,6 +792,222 @@ impl TrackerConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use serde_norway::{Mapping, Number, Value};
+
+    /// The value of the dotted `key`.
+    fn key_value(c: &TrackerConfig, key: &str) -> Option<Value> {
+        let mut v = serde_norway::to_value(c).ok()?;
+        for part in key.split('.') {
+            v = v.as_mapping_mut()?.remove(part)?;
+        }
+        Some(v)
+    }
+
+    /// `c` with the dotted `key` set to `v` (not validated), or the parser's error.
+    fn with_key(c: &TrackerConfig, key: &str, v: Value) -> Result<TrackerConfig, String> {
+        let mut tree = serde_norway::to_value(c).unwrap();
+        let mut node = &mut tree;
+        let parts: Vec<&str> = key.split('.').collect();
+        for (i, part) in parts.iter().enumerate() {
+            let map = node.as_mapping_mut().unwrap();
+            let k = Value::String((*part).to_string());
+            if i + 1 == parts.len() {
+                map.insert(k, v);
+                break;
+            }
+            node = map
+                .entry(k)
+                .or_insert_with(|| Value::Mapping(Mapping::new()));
+        }
+        serde_norway::from_value(tree).map_err(|e| e.to_string())
+    }
+
+    /// Dotted names of a YAML tree's leaves (a sequence is a leaf).
+    fn leaves(prefix: &str, v: &Value, out: &mut Vec<String>) {
+        match v {
+            Value::Mapping(m) => {
+                for (k, v) in m {
+                    let k = k.as_str().unwrap();
+                    let name = if prefix.is_empty() {
+                        k.to_string()
+                    } else {
+                        format!("{prefix}.{k}")
+                    };
+                    leaves(&name, v, out);
+                }
+            }
+            _ => out.push(prefix.to_string()),
+        }
+    }
+
+    #[test]
+    fn the_key_table_lists_every_key_of_the_configuration_once_in_order() {
+        let mut keys = Vec::new();
+        leaves(
+            "",
+            &serde_norway::to_value(TrackerConfig::default()).unwrap(),
+            &mut keys,
+        );
+        let table: Vec<&str> = TRACKER_KEYS.iter().map(|k| k.name).collect();
+        assert_eq!(keys, table);
+        for k in TRACKER_KEYS {
+            assert!(k.doc.len() > 10 && k.doc.ends_with('.'), "{}: doc", k.name);
+            let v = key_value(&TrackerConfig::default(), k.name).unwrap();
+            let fits = match (k.kind, &v) {
+                (Kind::Bool, Value::Bool(_)) | (Kind::Path, Value::String(_)) => true,
+                (Kind::Int, Value::Number(n)) => n.is_u64(),
+                (Kind::Float, Value::Number(_)) | (Kind::FloatList, Value::Sequence(_)) => true,
+                (Kind::Choice(c), Value::String(s)) => c.contains(&s.as_str()),
+                (Kind::Section, Value::Null) => true,
+                _ => false,
+            };
+            assert!(fits, "{}: {:?} holds {v:?}", k.name, k.kind);
+        }
+    }
+
+    #[test]
+    fn the_choices_of_the_table_are_the_parsers() {
+        let d = TrackerConfig::default();
+        for k in TRACKER_KEYS {
+            let Kind::Choice(choices) = k.kind else {
+                continue;
+            };
+            for c in choices {
+                with_key(&d, k.name, Value::String((*c).into()))
+                    .unwrap_or_else(|e| panic!("{}: {c}: {e}", k.name));
+            }
+            let e = with_key(&d, k.name, Value::String("bogus".into())).unwrap_err();
+            // The parser names the bogus value and then exactly the table's choices.
+            let expected = e.split_once("expected").unwrap().1;
+            for c in choices {
+                assert!(expected.contains(&format!("`{c}`")), "{}: {e}", k.name);
+            }
+            assert_eq!(
+                expected.matches('`').count(),
+                2 * choices.len(),
+                "{}: {e}",
+                k.name
+            );
+        }
+    }
+
+    /// `name` = `v` is refused by the table's range of `name`.
+    fn refused_by_range(k: &KeySpec, v: Value) -> bool {
+        let Ok(c) = with_key(&TrackerConfig::default(), k.name, v.clone()) else {
+            return false;
+        };
+        matches!(c.validate(), Err(ConfigError::OutOfRange { field, expected, .. })
+            if field == k.name && expected == k.range.words(k.unit))
+    }
+
+    fn number(v: f64) -> Value {
+        Value::Number(Number::from(v))
+    }
+
+    #[test]
+    fn every_range_of_the_table_is_enforced_at_both_ends() {
+        let mut checked = 0;
+        for k in TRACKER_KEYS {
+            let (inside, outside): (Vec<Value>, Vec<Value>) = match k.range {
+                Range::Any => continue,
+                Range::Int(lo, hi) => {
+                    let mut out = vec![Value::Number(Number::from(hi + 1))];
+                    if lo > 0 {
+                        out.push(Value::Number(Number::from(lo - 1)));
+                    }
+                    (
+                        vec![
+                            Value::Number(Number::from(lo)),
+                            Value::Number(Number::from(hi)),
+                        ],
+                        out,
+                    )
+                }
+                Range::Float {
+                    lo,
+                    hi,
+                    open_lo,
+                    open_hi,
+                } => {
+                    let step = |x: f64| (x.abs() * 1e-3).max(1e-3);
+                    let (mut inside, mut outside) = (Vec::new(), vec![number(f64::NAN)]);
+                    outside.push(number(lo - step(lo)));
+                    if open_lo { &mut outside } else { &mut inside }.push(number(lo));
+                    if hi.is_finite() {
+                        outside.push(number(hi + step(hi)));
+                        if open_hi { &mut outside } else { &mut inside }.push(number(hi));
+                    } else {
+                        outside.push(number(f64::INFINITY));
+                    }
+                    (inside, outside)
+                }
+                Range::List {
+                    min_len,
+                    max_len,
+                    lo,
+                    hi,
+                } => {
+                    let list = |n: usize, x: f64| Value::Sequence(vec![number(x); n]);
+                    (
+                        vec![list(min_len, lo), list(max_len, hi)],
+                        vec![
+                            list(min_len - 1, 1.0),
+                            list(max_len + 1, 1.0),
+                            list(min_len, lo * 0.99),
+                            list(min_len, hi * 1.01),
+                        ],
+                    )
+                }
+            };
+            for v in outside {
+                assert!(
+                    refused_by_range(k, v.clone()),
+                    "{} = {v:?} accepted",
+                    k.name
+                );
+            }
+            for v in inside {
+                // Accepted by the range (a constraint between keys may still refuse it).
+                assert!(
+                    !refused_by_range(k, v.clone()),
+                    "{} = {v:?} refused",
+                    k.name
+                );
+            }
+            checked += 1;
+        }
+        assert!(checked > 50, "{checked}");
+    }
+
+    #[test]
+    fn live_keys_are_exactly_those_the_table_marks_live() {
+        let d = TrackerConfig::default();
+        for k in TRACKER_KEYS {
+            let v = key_value(&d, k.name).unwrap();
+            let other = match (k.kind, &v) {
+                (Kind::Bool, Value::Bool(b)) => Value::Bool(!b),
+                (Kind::Int, Value::Number(n)) => {
+                    Value::Number(Number::from(n.as_u64().unwrap() + 1))
+                }
+                (Kind::Float, Value::Number(n)) => number(n.as_f64().unwrap() * 0.5 + 0.01),
+                (Kind::FloatList, _) => Value::Sequence(vec![number(1.0)]),
+                (Kind::Choice(c), Value::String(s)) => {
+                    Value::String(c.iter().find(|c| **c != s).unwrap().to_string())
+                }
+                (Kind::Path, _) => Value::String("x.onnx".into()),
+                _ => continue,
+            };
+            let changed = with_key(&d, k.name, other).unwrap();
+            assert_ne!(changed, d, "{}", k.name);
+            assert_eq!(
+                d.with_live_keys_of(&changed) == changed,
+                k.live,
+                "{}",
+                k.name
+            );
+        }
+        assert_eq!(live_keys().count(), 18);
+    }
 
     #[test]
     fn default_config_is_valid() {

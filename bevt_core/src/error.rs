@@ -14,13 +14,13 @@ pub enum ConfigError {
         /// The offending value, formatted.
         value: String,
         /// The allowed range, in words.
-        expected: &'static str,
+        expected: String,
     },
     /// Two fields contradict each other.
     #[error("config fields are inconsistent: {0}")]
     Inconsistent(String),
     /// A running tracker was given a configuration that differs in a field which only
-    /// takes effect when a tracker is built (see [`crate::config::LIVE_KEYS`]).
+    /// takes effect when a tracker is built (see [`crate::config::keys::live_keys`]).
     #[error("config field(s) {0} cannot change while tracking (they shape the tracker built at initialisation)")]
     NotLive(String),
 }

@@ -513,7 +513,7 @@ impl BevtTracker {
     }
 
     /// Takes a new specification that differs from the current one in
-    /// [`crate::config::LIVE_KEYS`] only, at once: the running track keeps its model,
+    /// live keys ([`crate::config::keys::live_keys`]) only, at once: the running track keeps its model,
     /// state and counters and uses the new thresholds and rates from the next frame.
     ///
     /// # Errors

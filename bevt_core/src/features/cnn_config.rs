@@ -226,7 +226,7 @@ fn check(
         Err(ConfigError::OutOfRange {
             field,
             value: value.to_string(),
-            expected,
+            expected: expected.to_string(),
         })
     }
 }

@@ -17,7 +17,7 @@
 //! every tracker key as
 //! `tracker.<section>.<key>` (as in `config/bevt.yaml`, ranges in
 //! `TrackerConfig::validate`). Every number has a range that bounds the work and memory
-//! it implies ([`ranges`]); unknown parameters and values outside a range stop start-up
+//! it implies ([`NODE_KEYS`]); unknown parameters and values outside a range stop start-up
 //! with a message naming the parameter and its range.
 
 use crate::node::app::NodeSettings;
@@ -73,35 +73,231 @@ pub struct Launch {
     pub demo_duration: Duration,
 }
 
-/// The accepted range of every numeric node parameter (inclusive).
-pub mod ranges {
-    /// `max_image_width`, `max_image_height`: pixels (the core's frame side limit).
-    pub const IMAGE_SIDE: (u64, u64) = (16, 32768);
-    /// `dds_max_sample_bytes`: bytes (64 KiB to 512 MiB).
-    pub const DDS_MAX_SAMPLE_BYTES: (u64, u64) = (64 << 10, 512 << 20);
-    /// `max_image_pixels`: pixels (64 MP: 512 MiB of decoder output at most).
-    pub const IMAGE_PIXELS: (u64, u64) = (256, 64 << 20);
-    /// `reinit_buffer_frames`: frames.
-    pub const BUFFER_FRAMES: (u64, u64) = (1, 1000);
-    /// `reinit_buffer_mb`: MiB; also at least one largest frame (4 bytes × `max_image_pixels`).
-    pub const BUFFER_MB: (u64, u64) = (1, 4096);
-    /// `reinit_max_fast_forward`: frames tracked per request.
-    pub const FAST_FORWARD: (u64, u64) = (0, 100);
-    /// `reinit_rate_hz`: requests per second.
-    pub const REINIT_RATE_HZ: (f64, f64) = (0.01, 100.0);
-    /// `reinit_burst`: requests.
-    pub const REINIT_BURST: (u64, u64) = (1, 100);
-    /// `stale_timeout_s`: seconds.
-    pub const STALE_TIMEOUT_S: (f64, f64) = (0.05, 3600.0);
-    /// `diagnostics_period_s`: seconds.
-    pub const DIAGNOSTICS_PERIOD_S: (f64, f64) = (0.01, 3600.0);
-    /// `debug_image_rate_hz` when not 0 (off): Hz.
-    pub const DEBUG_IMAGE_RATE_HZ: (f64, f64) = (0.01, 100.0);
-    /// `class_id`: characters.
-    pub const CLASS_ID_CHARS: (u64, u64) = (1, 256);
-    /// `bevt_node --demo --duration`: seconds.
-    pub const DEMO_DURATION_S: (f64, f64) = (0.1, 86400.0);
+/// What a node parameter holds (its ROS type).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NodeType {
+    /// `bool`.
+    Bool,
+    /// `integer`.
+    Integer,
+    /// `double`.
+    Double,
+    /// `string`.
+    String,
+    /// `string[]`.
+    StringArray,
 }
+
+impl NodeType {
+    /// The type's name in the documentation.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Bool => "bool",
+            Self::Integer => "integer",
+            Self::Double => "double",
+            Self::String => "string",
+            Self::StringArray => "string[]",
+        }
+    }
+}
+
+/// The values a node parameter accepts, as far as a range can say.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum NodeRange {
+    /// Any value of its type that the code accepts (see [`NodeKey::cross`]).
+    Any,
+    /// Integers `lo..=hi`.
+    Int(u64, u64),
+    /// Finite reals `lo..=hi`.
+    Real(f64, f64),
+    /// 0 (off) or a finite real `lo..=hi`.
+    OffOr(f64, f64),
+    /// Text of `lo..=hi` characters.
+    Chars(u64, u64),
+    /// One of these names.
+    Choice(&'static [&'static str]),
+    /// Exactly this value.
+    Fixed(&'static str),
+}
+
+/// One node parameter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NodeKey {
+    /// Name (`-p name:=value`).
+    pub name: &'static str,
+    /// ROS type.
+    pub ty: NodeType,
+    /// The range the start-up check enforces from this table.
+    pub range: NodeRange,
+    /// Other conditions, checked by code, in words ("" when none).
+    pub cross: &'static str,
+    /// Unit ("" when none).
+    pub unit: &'static str,
+    /// Takes effect while running (`ros2 param set`).
+    pub live: bool,
+    /// Declared by the parameter services (the `security_*` ones are start-up only).
+    pub served: bool,
+    /// The default in words when it is not simply the value of a node started without
+    /// parameters ("" = that value).
+    pub default: &'static str,
+    /// What it does.
+    pub doc: &'static str,
+}
+
+impl NodeKey {
+    /// The range in words ("0.01..=100 Hz").
+    pub fn range_words(&self) -> String {
+        self.range_words_in(self.unit)
+    }
+
+    /// [`Self::range_words`] with the unit written as `unit` ("" = none).
+    pub fn range_words_in(&self, unit_text: &str) -> String {
+        let unit = |s: String| {
+            if unit_text.is_empty() {
+                s
+            } else {
+                format!("{s} {unit_text}")
+            }
+        };
+        match self.range {
+            NodeRange::Any => String::new(),
+            NodeRange::Int(lo, hi) => unit(format!("{lo}..={hi}")),
+            NodeRange::Real(lo, hi) => unit(format!("{lo}..={hi}")),
+            NodeRange::OffOr(lo, hi) => unit(format!("0 (off) or {lo}..={hi}")),
+            NodeRange::Chars(lo, hi) => format!("{lo}..={hi} characters"),
+            NodeRange::Choice(c) => c.join(" | "),
+            NodeRange::Fixed(v) => v.to_string(),
+        }
+    }
+
+    /// The accepted values in words: the range and the other conditions.
+    pub fn constraints(&self) -> String {
+        self.constraints_in(self.unit)
+    }
+
+    /// [`Self::constraints`] with the unit written as `unit` ("" = none).
+    pub fn constraints_in(&self, unit: &str) -> String {
+        match (self.range_words_in(unit), self.cross) {
+            (w, "") => w,
+            (w, c) if w.is_empty() => c.to_string(),
+            (w, c) => format!("{w}; {c}"),
+        }
+    }
+
+    /// `(from, to)` for a ROS `IntegerRange` / `FloatingPointRange`.
+    pub fn bounds(&self) -> Option<(f64, f64)> {
+        match self.range {
+            NodeRange::Int(lo, hi) => Some((lo as f64, hi as f64)),
+            NodeRange::Real(lo, hi) => Some((lo, hi)),
+            _ => None,
+        }
+    }
+}
+
+/// The node parameter `name`.
+///
+/// # Panics
+/// When `name` is not in [`NODE_KEYS`] (a test runs every lookup the start-up makes).
+#[allow(clippy::panic)]
+pub fn node_key(name: &str) -> &'static NodeKey {
+    match NODE_KEYS.iter().find(|k| k.name == name) {
+        Some(k) => k,
+        None => panic!("node parameter {name} is not in NODE_KEYS"),
+    }
+}
+
+/// The integer range of `name` in the table.
+fn int_range(name: &str) -> (u64, u64) {
+    match node_key(name).range {
+        NodeRange::Int(lo, hi) | NodeRange::Chars(lo, hi) => (lo, hi),
+        _ => (0, u64::MAX),
+    }
+}
+
+/// The real range of `name` in the table.
+fn real_range(name: &str) -> (f64, f64) {
+    match node_key(name).range {
+        NodeRange::Real(lo, hi) | NodeRange::OffOr(lo, hi) => (lo, hi),
+        _ => (f64::MIN, f64::MAX),
+    }
+}
+
+const LIVE: bool = true;
+const FIXED: bool = false;
+
+const fn nk(
+    name: &'static str,
+    ty: NodeType,
+    range: NodeRange,
+    unit: &'static str,
+    live: bool,
+    doc: &'static str,
+) -> NodeKey {
+    NodeKey {
+        name,
+        ty,
+        range,
+        cross: "",
+        unit,
+        live,
+        served: true,
+        default: "",
+        doc,
+    }
+}
+
+/// Every node parameter (besides the tracker keys, `tracker.<section>.<key>`).
+#[rustfmt::skip]
+pub static NODE_KEYS: &[NodeKey] = &[
+    NodeKey { default: "unset: `ROS_DOMAIN_ID`, else 0",
+        ..nk("domain_id", NodeType::Integer, NodeRange::Int(0, 232), "", FIXED,
+        "DDS domain (ROS_DOMAIN_ID when unset).") },
+    NodeKey { cross: "IPv4 addresses; [\"0.0.0.0\"] alone = all interfaces; [] is an error; ROS_LOCALHOST_ONLY=1 sets loopback",
+        ..nk("network_interfaces", NodeType::StringArray, NodeRange::Any, "", FIXED,
+        "IPv4 addresses DDS listens and sends on; [\"0.0.0.0\"] = all interfaces.") },
+    NodeKey { cross: ">= 4 B × max_image_pixels + 65536 B",
+        ..nk("dds_max_sample_bytes", NodeType::Integer, NodeRange::Int(64 << 10, 512 << 20), "B", FIXED,
+        "Largest DDS sample reassembled from fragments, bytes: at least the largest image message.") },
+    nk("service_mapping", NodeType::String, NodeRange::Choice(&["enhanced", "cyclone"]), "", FIXED,
+        "Service wire mapping: enhanced (Fast DDS, rmw_fastrtps) or cyclone (rmw_cyclonedds)."),
+    nk("max_image_width", NodeType::Integer, NodeRange::Int(16, 32768), "px", FIXED,
+        "Widest camera frame accepted, pixels (larger frames are refused before decoding)."),
+    nk("max_image_height", NodeType::Integer, NodeRange::Int(16, 32768), "px", FIXED,
+        "Tallest camera frame accepted, pixels."),
+    nk("max_image_pixels", NodeType::Integer, NodeRange::Int(256, 64 << 20), "px", FIXED,
+        "Most pixels of a camera frame accepted (bounds decoder memory)."),
+    nk("reinit_buffer_frames", NodeType::Integer, NodeRange::Int(1, 1000), "frames", FIXED,
+        "Recent frames kept for delayed re-initialisation."),
+    NodeKey { cross: ">= 4 B × max_image_pixels",
+        ..nk("reinit_buffer_mb", NodeType::Integer, NodeRange::Int(1, 4096), "MiB", FIXED,
+        "Memory of the re-initialisation buffer, MiB.") },
+    nk("reinit_max_fast_forward", NodeType::Integer, NodeRange::Int(0, 100), "frames", LIVE,
+        "Most buffered frames one re-initialisation tracks through to the newest."),
+    nk("reinit_rate_hz", NodeType::Double, NodeRange::Real(0.01, 100.0), "Hz", LIVE,
+        "Re-initialisation requests admitted per second (token bucket refill)."),
+    nk("reinit_burst", NodeType::Integer, NodeRange::Int(1, 100), "requests", LIVE,
+        "Re-initialisation requests admitted at once (token bucket depth)."),
+    nk("stale_timeout_s", NodeType::Double, NodeRange::Real(0.05, 3600.0), "s", LIVE,
+        "No image for this long while tracking: the status says the camera is stale, seconds."),
+    nk("diagnostics_period_s", NodeType::Double, NodeRange::Real(0.01, 3600.0), "s", LIVE,
+        "Period of /diagnostics, seconds."),
+    nk("debug_image_rate_hz", NodeType::Double, NodeRange::OffOr(0.01, 100.0), "Hz", LIVE,
+        "Rate of the debug_image topic (the frame with the box drawn), Hz; 0 = off."),
+    NodeKey { cross: "no control characters",
+        ..nk("class_id", NodeType::String, NodeRange::Chars(1, 256), "", LIVE,
+        "class_id of the published detections.") },
+    nk("use_sim_time", NodeType::Bool, NodeRange::Fixed("false"), "", FIXED,
+        "Not supported: the node stamps with wall-clock time (always false)."),
+    NodeKey { served: false, default: "unset", cross: "a keystore directory",
+        ..nk("security_keystore", NodeType::String, NodeRange::Any, "", FIXED,
+        "DDS Security on, strategy Enforce (docs/security.md); unset: the ROS_SECURITY_* variables. Start-up only, not served as a ROS parameter.") },
+    NodeKey { served: false, default: "`/`", cross: "an enclave path",
+        ..nk("security_enclave", NodeType::String, NodeRange::Any, "", FIXED,
+        "Identity in the keystore; --enclave wins. Start-up only, not served as a ROS parameter.") },
+];
+
+/// `bevt_node --demo --duration`: seconds (a command-line option, not a parameter).
+const DEMO_DURATION_S: (f64, f64) = (0.1, 86400.0);
 
 /// Bytes in a MiB.
 const MIB: u64 = 1 << 20;
@@ -256,7 +452,7 @@ fn parse_command_line(args: &[String]) -> Result<CommandLine, LaunchError> {
                 let s: f64 = v
                     .parse()
                     .map_err(|_| LaunchError::Args(format!("--duration {v:?}: not a number")))?;
-                cl.demo_duration = Some(seconds("--duration", s, ranges::DEMO_DURATION_S)?);
+                cl.demo_duration = Some(seconds("--duration", s, DEMO_DURATION_S)?);
             }
             "--params-file" if ros => cl.files.push(next("--params-file")?),
             "-p" | "--param" if ros => {
@@ -390,20 +586,14 @@ fn apply_param(
     tracker_sets: &mut Vec<String>,
 ) -> Result<(), LaunchError> {
     let as_f64 = || v.as_f64().ok_or_else(|| param_err(k, "expected a number"));
-    let as_u64 = || {
-        v.as_u64()
-            .ok_or_else(|| param_err(k, "expected a non-negative integer"))
-    };
     match k {
         "domain_id" => {
-            ros_settings.domain_id = u16::try_from(as_u64()?)
-                .ok()
-                .filter(|d| *d <= 232)
-                .ok_or_else(|| param_err(k, "expected 0..=232"))?
+            ros_settings.domain_id = u16::try_from(int_in(k, v, int_range(k))?)
+                .map_err(|e| param_err(k, e.to_string()))?
         }
         "network_interfaces" => ros_settings.networks = parse_networks(k, v)?,
         "dds_max_sample_bytes" => {
-            ros_settings.max_sample_bytes = int_in(k, v, ranges::DDS_MAX_SAMPLE_BYTES)? as usize
+            ros_settings.max_sample_bytes = int_in(k, v, int_range(k))? as usize
         }
         "service_mapping" => {
             ros_settings.service_mapping = match v.as_str() {
@@ -412,46 +602,42 @@ fn apply_param(
                 _ => {
                     return Err(param_err(
                         k,
-                        "expected enhanced (Fast DDS) or cyclone (rmw_cyclonedds)",
+                        format!("expected {}", node_key(k).range_words()),
                     ))
                 }
             }
         }
-        "max_image_width" => node.image_limits.max_width = int_in(k, v, ranges::IMAGE_SIDE)? as u32,
-        "max_image_height" => {
-            node.image_limits.max_height = int_in(k, v, ranges::IMAGE_SIDE)? as u32
-        }
-        "max_image_pixels" => node.image_limits.max_pixels = int_in(k, v, ranges::IMAGE_PIXELS)?,
-        "reinit_buffer_frames" => {
-            node.reinit_buffer_frames = int_in(k, v, ranges::BUFFER_FRAMES)? as usize
-        }
+        "max_image_width" => node.image_limits.max_width = int_in(k, v, int_range(k))? as u32,
+        "max_image_height" => node.image_limits.max_height = int_in(k, v, int_range(k))? as u32,
+        "max_image_pixels" => node.image_limits.max_pixels = int_in(k, v, int_range(k))?,
+        "reinit_buffer_frames" => node.reinit_buffer_frames = int_in(k, v, int_range(k))? as usize,
         "reinit_buffer_mb" => {
-            node.reinit_buffer_bytes = (int_in(k, v, ranges::BUFFER_MB)? * MIB) as usize
+            node.reinit_buffer_bytes = (int_in(k, v, int_range(k))? * MIB) as usize
         }
         "reinit_max_fast_forward" => {
-            node.reinit_max_fast_forward = int_in(k, v, ranges::FAST_FORWARD)? as usize
+            node.reinit_max_fast_forward = int_in(k, v, int_range(k))? as usize
         }
         "reinit_rate_hz" => {
-            node.reinit_rate_hz = float_in(k, as_f64()?, ranges::REINIT_RATE_HZ, "Hz")?
+            node.reinit_rate_hz = float_in(k, as_f64()?, real_range(k), node_key(k).unit)?
         }
-        "reinit_burst" => node.reinit_burst = int_in(k, v, ranges::REINIT_BURST)? as u32,
-        "stale_timeout_s" => node.stale_timeout = seconds(k, as_f64()?, ranges::STALE_TIMEOUT_S)?,
+        "reinit_burst" => node.reinit_burst = int_in(k, v, int_range(k))? as u32,
+        "stale_timeout_s" => node.stale_timeout = seconds(k, as_f64()?, real_range(k))?,
         "diagnostics_period_s" => {
-            ros_settings.diagnostics_period = seconds(k, as_f64()?, ranges::DIAGNOSTICS_PERIOD_S)?
+            ros_settings.diagnostics_period = seconds(k, as_f64()?, real_range(k))?
         }
         "debug_image_rate_hz" => {
             let r = as_f64()?;
             ros_settings.debug_image_rate_hz = if r == 0.0 {
                 0.0
             } else {
-                float_in(k, r, ranges::DEBUG_IMAGE_RATE_HZ, "Hz (or 0 = off)")?
+                float_in(k, r, real_range(k), "Hz (or 0 = off)")?
             };
         }
         "class_id" => {
             let c = v
                 .as_str()
                 .ok_or_else(|| param_err(k, "expected a string"))?;
-            let (lo, hi) = ranges::CLASS_ID_CHARS;
+            let (lo, hi) = int_range(k);
             if !(lo..=hi).contains(&(c.chars().count() as u64)) {
                 return Err(param_err(k, format!("expected {lo}..={hi} characters")));
             }
@@ -848,5 +1034,61 @@ mod tests {
             l.ros.max_sample_bytes,
             crate::node::ros::DEFAULT_MAX_SAMPLE_BYTES
         );
+    }
+
+    #[test]
+    fn the_node_table_ranges_are_what_start_up_enforces_at_both_ends() {
+        let none = |_: &str| None;
+        // Refused by the table's range (not by a condition between parameters).
+        let refused = |k: &NodeKey, v: String| {
+            let words = match k.range {
+                NodeRange::Int(lo, hi) | NodeRange::Chars(lo, hi) => format!("{lo}..={hi}"),
+                NodeRange::Real(lo, hi) | NodeRange::OffOr(lo, hi) => format!("{lo}..={hi}"),
+                _ => k.range_words(),
+            };
+            launch_from_args(&args(&format!("--ros-args -p {}:={v}", k.name)), none)
+                .err()
+                .map(|e| e.to_string())
+                .is_some_and(|e| {
+                    e.contains(&format!("parameter {}:", k.name)) && e.contains(&words)
+                })
+        };
+        let mut checked = 0;
+        for k in NODE_KEYS {
+            let (inside, outside): (Vec<String>, Vec<String>) = match k.range {
+                NodeRange::Int(lo, hi) => {
+                    let mut out = vec![(hi + 1).to_string()];
+                    if lo > 0 {
+                        out.push((lo - 1).to_string());
+                    }
+                    (vec![lo.to_string(), hi.to_string()], out)
+                }
+                NodeRange::Real(lo, hi) | NodeRange::OffOr(lo, hi) => (
+                    vec![format!("{lo:?}"), format!("{hi:?}")],
+                    vec![
+                        format!("{:?}", lo * 0.99),
+                        format!("{:?}", hi * 1.01),
+                        ".nan".into(),
+                    ],
+                ),
+                NodeRange::Chars(lo, hi) => (
+                    vec!["x".repeat(lo as usize), "x".repeat(hi as usize)],
+                    vec!["x".repeat(hi as usize + 1)],
+                ),
+                NodeRange::Choice(c) => (
+                    c.iter().map(|c| c.to_string()).collect(),
+                    vec!["bogus".into()],
+                ),
+                NodeRange::Any | NodeRange::Fixed(_) => continue,
+            };
+            for v in outside {
+                assert!(refused(k, v.clone()), "{} = {v} accepted", k.name);
+            }
+            for v in inside {
+                assert!(!refused(k, v.clone()), "{} = {v} refused", k.name);
+            }
+            checked += 1;
+        }
+        assert!(checked >= 14, "{checked}");
     }
 }

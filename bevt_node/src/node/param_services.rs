@@ -1,16 +1,13 @@
 //! The node's parameters as ROS users expect them: the `rcl_interfaces` parameter services
 //! (`ros2 param list/get/set/describe/dump`) and `/parameter_events`.
 //!
-//! Every start-up parameter of [`crate::node::node_params`] and every tracker key
-//! (`tracker.<section>.<key>`) is declared with its value, a description (for tracker keys
-//! the doc comment of the field in `bevt_core::config`, via `bevt_core::config::key_docs`)
-//! and its range (for tracker keys the one `TrackerConfig::validate` enforces, found by
-//! asking it). A set is checked exactly as at start-up (same ranges, same messages) and
-//! then:
-//! - **live** parameters take effect at once: [`LIVE_NODE`] (rate limit, fast-forward,
-//!   stale timeout, diagnostics period, debug-image rate, class id) and the tracker's
-//!   [`bevt_core::config::LIVE_KEYS`] (thresholds, learning rates, per-frame budgets), on
-//!   the running track;
+//! Every start-up parameter of [`crate::node::node_params::NODE_KEYS`] and every tracker
+//! key of [`bevt_core::config::TRACKER_KEYS`] (`tracker.<section>.<key>`) is declared with
+//! its value and, from its table, its description, range and liveness. A set is checked
+//! exactly as at start-up (same ranges, same messages) and then:
+//! - **live** parameters take effect at once: the node keys and tracker keys whose table
+//!   row says so (rate limit, fast-forward, stale timeout, diagnostics period, debug-image
+//!   rate, class id; thresholds, learning rates, per-frame budgets), on the running track;
 //! - every other parameter is **read-only** while running (its descriptor says so): the
 //!   set is refused with the reason and the old value stays.
 //!
@@ -19,8 +16,9 @@
 //! mapping only and describe no parameter.
 
 use crate::node::app::NodeSettings;
-use crate::node::node_params::launch_from_args;
+use crate::node::node_params::{launch_from_args, NODE_KEYS};
 use crate::node::ros::RosSettings;
+use bevt_core::config::{Kind, TRACKER_KEYS};
 use bevt_core::{TrackerConfig, TrackerSpec};
 use ros2_client::parameters::raw;
 use ros2_client::rcl_interfaces::{
@@ -33,17 +31,6 @@ use ros2_client::{Name, Publisher, Server, ServiceMapping, ServiceTypeName};
 use serde_norway::{Mapping, Number, Value};
 use std::collections::BTreeMap;
 use std::time::Duration;
-
-/// Node parameters that take effect while running.
-pub const LIVE_NODE: &[&str] = &[
-    "class_id",
-    "debug_image_rate_hz",
-    "diagnostics_period_s",
-    "reinit_burst",
-    "reinit_max_fast_forward",
-    "reinit_rate_hz",
-    "stale_timeout_s",
-];
 
 /// Prefix of the tracker keys.
 const TRACKER: &str = "tracker.";
@@ -229,69 +216,6 @@ pub struct NodeParams {
     tracker: TrackerConfig,
 }
 
-/// Descriptions of the node parameters (ranges come from the start-up checks).
-const NODE_DOCS: &[(&str, &str)] = &[
-    ("domain_id", "DDS domain (ROS_DOMAIN_ID when unset)."),
-    (
-        "network_interfaces",
-        "IPv4 addresses DDS listens and sends on; [\"0.0.0.0\"] = all interfaces.",
-    ),
-    (
-        "dds_max_sample_bytes",
-        "Largest DDS sample reassembled from fragments, bytes: at least the largest image message.",
-    ),
-    (
-        "service_mapping",
-        "Service wire mapping: enhanced (Fast DDS, rmw_fastrtps) or cyclone (rmw_cyclonedds).",
-    ),
-    (
-        "max_image_width",
-        "Widest camera frame accepted, pixels (larger frames are refused before decoding).",
-    ),
-    ("max_image_height", "Tallest camera frame accepted, pixels."),
-    (
-        "max_image_pixels",
-        "Most pixels of a camera frame accepted (bounds decoder memory).",
-    ),
-    (
-        "reinit_buffer_frames",
-        "Recent frames kept for delayed re-initialisation.",
-    ),
-    (
-        "reinit_buffer_mb",
-        "Memory of the re-initialisation buffer, MiB.",
-    ),
-    (
-        "reinit_max_fast_forward",
-        "Most buffered frames one re-initialisation tracks through to the newest.",
-    ),
-    (
-        "reinit_rate_hz",
-        "Re-initialisation requests admitted per second (token bucket refill).",
-    ),
-    (
-        "reinit_burst",
-        "Re-initialisation requests admitted at once (token bucket depth).",
-    ),
-    (
-        "stale_timeout_s",
-        "No image for this long while tracking: the status says the camera is stale, seconds.",
-    ),
-    ("diagnostics_period_s", "Period of /diagnostics, seconds."),
-    (
-        "debug_image_rate_hz",
-        "Rate of the debug_image topic (the frame with the box drawn), Hz; 0 = off.",
-    ),
-    ("class_id", "class_id of the published detections."),
-    (
-        "use_sim_time",
-        "Not supported: the node stamps with wall-clock time (always false).",
-    ),
-];
-
-/// Probe values that every numeric range refuses: the first refusal names the range.
-const PROBES: &[f64] = &[f64::NAN, -1e30, 1e30, -1.0, 0.0, 1e12];
-
 impl NodeParams {
     /// The parameters of a node started with these settings.
     pub fn new(ros: &RosSettings, node: &NodeSettings, tracker: &TrackerConfig) -> Self {
@@ -339,35 +263,24 @@ impl NodeParams {
     }
 
     fn declare_node(&mut self) {
-        for (name, doc) in NODE_DOCS {
-            let Some(value) = self.node_value(name) else {
+        for k in NODE_KEYS.iter().filter(|k| k.served) {
+            let Some(value) = self.node_value(k.name) else {
                 continue;
             };
-            let constraints = if *name == "use_sim_time" {
-                "false".to_string()
-            } else {
-                node_constraints(name, &value)
-            };
-            let range = match name {
-                // 0 (off) or the range.
-                &"debug_image_rate_hz" => None,
-                _ => parse_range(&constraints),
-            };
             self.params.insert(
-                (*name).to_string(),
+                k.name.to_string(),
                 Declared {
                     value,
-                    description: (*doc).to_string(),
-                    constraints,
-                    range,
-                    live: LIVE_NODE.contains(name),
+                    description: k.doc.to_string(),
+                    constraints: k.constraints(),
+                    range: k.bounds(),
+                    live: k.live,
                 },
             );
         }
     }
 
     fn declare_tracker(&mut self) {
-        let docs: BTreeMap<String, String> = bevt_core::config::key_docs().into_iter().collect();
         let Ok(tree) = serde_norway::to_value(&self.tracker) else {
             return;
         };
@@ -377,21 +290,29 @@ impl NodeParams {
             let Some(value) = param_of_yaml(&v) else {
                 continue;
             };
-            let constraints = tracker_constraints(&self.tracker, &key, &value);
-            let description = docs
-                .get(&key)
-                .cloned()
-                .unwrap_or_else(|| format!("Tracker key {key} (README \"Configuration\")."));
-            self.params.insert(
-                format!("{TRACKER}{key}"),
-                Declared {
-                    range: parse_range(&constraints),
+            let declared = match TRACKER_KEYS.iter().find(|k| k.name == key) {
+                Some(k) => Declared {
                     value,
-                    description,
-                    constraints,
-                    live: bevt_core::config::LIVE_KEYS.contains(&key.as_str()),
+                    description: k.doc.to_string(),
+                    constraints: k.constraints(),
+                    range: match k.kind {
+                        Kind::Int | Kind::Float => k.range.bounds(),
+                        _ => None,
+                    },
+                    live: k.live,
                 },
-            );
+                // The keys of a `features.cnn` section (a CNN preset).
+                None => Declared {
+                    value,
+                    description: format!(
+                        "CNN feature key {key} (docs/configuration.md, features.cnn)."
+                    ),
+                    constraints: String::new(),
+                    range: None,
+                    live: false,
+                },
+            };
+            self.params.insert(format!("{TRACKER}{key}"), declared);
         }
     }
 
@@ -574,91 +495,13 @@ fn config_with(cfg: &TrackerConfig, key: &str, v: Value) -> Result<TrackerConfig
     serde_norway::from_value(tree).map_err(|e| format!("tracker.{key}: {e}"))
 }
 
-/// The range a tracker key's validation states, found by giving it values every range
-/// refuses: "" when none is refused (booleans, choices).
-fn tracker_constraints(cfg: &TrackerConfig, key: &str, value: &ParamValue) -> String {
-    let probes: Vec<Value> = match value {
-        ParamValue::Integer(_) => [0i64, -1, 1 << 40]
-            .iter()
-            .map(|i| Value::Number(Number::from(*i)))
-            .collect(),
-        ParamValue::Double(_) => PROBES
-            .iter()
-            .map(|f| Value::Number(Number::from(*f)))
-            .collect(),
-        ParamValue::DoubleArray(_) => vec![Value::Sequence(Vec::new())],
-        _ => return choices(key),
-    };
-    for p in probes {
-        if let Ok(c) = config_with(cfg, key, p) {
-            if let Err(bevt_core::ConfigError::OutOfRange {
-                field, expected, ..
-            }) = c.validate()
-            {
-                if field == key {
-                    return expected.to_string();
-                }
-            }
-        }
+/// The value of the dotted tracker `key` (`admm.iterations`) in `cfg`.
+pub fn tracker_value(cfg: &TrackerConfig, key: &str) -> Option<Value> {
+    let mut v = serde_norway::to_value(cfg).ok()?;
+    for part in key.split('.') {
+        v = v.as_mapping_mut()?.remove(part)?;
     }
-    String::new()
-}
-
-/// The accepted strings of a choice key, found by the parser's error for a wrong one.
-fn choices(key: &str) -> String {
-    match config_with(
-        &TrackerConfig::default(),
-        key,
-        Value::String("\u{1}".into()),
-    ) {
-        Err(e) => e
-            .split_once("expected ")
-            .map(|(_, rest)| rest.trim().to_string())
-            .unwrap_or_default(),
-        Ok(_) => String::new(),
-    }
-}
-
-/// The range a node parameter's start-up check states, found the same way.
-fn node_constraints(name: &str, value: &ParamValue) -> String {
-    let probes: Vec<String> = match value {
-        ParamValue::Integer(_) => vec!["-1".into(), "1e300".into(), "1099511627776".into()],
-        ParamValue::Double(_) => vec![".nan".into(), "-1".into(), "1e300".into()],
-        ParamValue::String(_) => vec!["\"\"".into(), "[]".into()],
-        ParamValue::StringArray(_) => vec!["[]".into()],
-        _ => Vec::new(),
-    };
-    for p in probes {
-        if let Err(e) = launch_from_args(
-            &["--ros-args".into(), "-p".into(), format!("{name}:={p}")],
-            |_| None,
-        ) {
-            let msg = e.to_string();
-            let reason = msg
-                .strip_prefix(&format!("parameter {name}: "))
-                .unwrap_or(&msg);
-            // "X is outside a..=b unit" -> "a..=b unit"
-            return reason
-                .split_once("outside ")
-                .map_or(reason, |(_, r)| r)
-                .trim_start_matches("expected ")
-                .to_string();
-        }
-    }
-    String::new()
-}
-
-/// `(from, to)` of a constraint like `1..=16 pixels`, `[0, 1]`, `(0, 1e6]`.
-fn parse_range(text: &str) -> Option<(f64, f64)> {
-    let t = text.trim();
-    let first = t.split_whitespace().next()?;
-    if let Some((a, b)) = first.split_once("..=") {
-        return Some((a.parse().ok()?, b.trim_end_matches(',').parse().ok()?));
-    }
-    let inner = t.strip_prefix(['[', '('])?;
-    let end = inner.find([']', ')'])?;
-    let (a, b) = inner[..end].split_once(',')?;
-    Some((a.trim().parse().ok()?, b.trim().parse().ok()?))
+    Some(v)
 }
 
 /// Leaves of a YAML tree by dotted name.
@@ -1104,7 +947,7 @@ mod tests {
     fn every_parameter_is_declared_with_a_description_and_tracker_numbers_with_a_range() {
         let p = params();
         let d = p.declared();
-        for name in NODE_DOCS.iter().map(|(n, _)| *n) {
+        for name in NODE_KEYS.iter().filter(|k| k.served).map(|k| k.name) {
             assert!(d.contains_key(name), "{name} not declared");
         }
         let tracker: Vec<_> = d.keys().filter(|k| k.starts_with(TRACKER)).collect();

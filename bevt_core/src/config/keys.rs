@@ -1,0 +1,514 @@
+//! The one table of tracker keys: [`TRACKER_KEYS`].
+//!
+//! Each key's name, kind, accepted range or choices, unit, liveness and description is
+//! written here once. From it come [`crate::TrackerConfig::validate`]'s range checks, the
+//! live-key set of [`crate::BevtTracker::retune`], the node's `ros2 param describe`
+//! descriptors and `docs/configuration.md`. Defaults are `TrackerConfig::default()` (equal
+//! to `config/bevt.yaml`, a test checks it). Constraints between keys that a range cannot
+//! state are code in `validate()`; the table only names them in words ([`KeySpec::cross`]).
+
+use crate::error::ConfigError;
+use std::fmt::Write as _;
+
+/// What a key holds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Kind {
+    /// `true` / `false`.
+    Bool,
+    /// A non-negative integer.
+    Int,
+    /// A real number (`f32`).
+    Float,
+    /// A list of reals.
+    FloatList,
+    /// One of these names (the YAML spelling of an enum).
+    Choice(&'static [&'static str]),
+    /// A file path (text).
+    Path,
+    /// An optional section of its own (`features.cnn`).
+    Section,
+}
+
+impl Kind {
+    /// The type's name in the documentation.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Bool => "bool",
+            Self::Int => "integer",
+            Self::Float => "float",
+            Self::FloatList => "float list",
+            Self::Choice(_) => "enum",
+            Self::Path => "path",
+            Self::Section => "section",
+        }
+    }
+}
+
+/// The values a key accepts, as far as a range can say.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Range {
+    /// Any value of its kind (booleans, choices, paths).
+    Any,
+    /// Integers `lo..=hi`.
+    Int(u64, u64),
+    /// Finite reals from `lo` to `hi` (`hi` may be infinite: no upper end); an open end is
+    /// excluded.
+    Float {
+        /// Lower end.
+        lo: f64,
+        /// Upper end.
+        hi: f64,
+        /// `lo` itself is refused.
+        open_lo: bool,
+        /// `hi` itself is refused.
+        open_hi: bool,
+    },
+    /// `min_len..=max_len` finite reals, each in `[lo, hi]`.
+    List {
+        /// Fewest values.
+        min_len: usize,
+        /// Most values.
+        max_len: usize,
+        /// Smallest value.
+        lo: f64,
+        /// Largest value.
+        hi: f64,
+    },
+}
+
+/// One tracker key.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KeySpec {
+    /// Dotted name, as in `config/bevt.yaml` (`admm.iterations`).
+    pub name: &'static str,
+    /// What it holds.
+    pub kind: Kind,
+    /// The range `validate()` enforces from this table.
+    pub range: Range,
+    /// Constraints involving other keys, in words ("" when none); checked by code in
+    /// `validate()`.
+    pub cross: &'static str,
+    /// Unit of the value ("" when none).
+    pub unit: &'static str,
+    /// Taken by a running tracker at once ([`crate::BevtTracker::retune`]); otherwise it
+    /// shapes what is built at initialisation and needs a new track.
+    pub live: bool,
+    /// What it does.
+    pub doc: &'static str,
+}
+
+/// A number as the table writes it: `1e6`, not `1000000`.
+fn num(v: f64) -> String {
+    let a = v.abs();
+    if a >= 1e4 && a.log10().fract() == 0.0 {
+        format!("{}1e{}", if v < 0.0 { "-" } else { "" }, a.log10() as i32)
+    } else {
+        format!("{v}")
+    }
+}
+
+impl Range {
+    /// The range in words, with `unit` ("1..=16 px", "(0, 1]", ">= 0").
+    pub fn words(&self, unit: &str) -> String {
+        let mut s = match *self {
+            Self::Any => return String::new(),
+            Self::Int(lo, hi) => format!("{lo}..={hi}"),
+            Self::Float {
+                lo,
+                hi,
+                open_lo,
+                open_hi,
+            } => {
+                if hi.is_infinite() {
+                    format!("{} {}", if open_lo { ">" } else { ">=" }, num(lo))
+                } else {
+                    format!(
+                        "{}{}, {}{}",
+                        if open_lo { "(" } else { "[" },
+                        num(lo),
+                        num(hi),
+                        if open_hi { ")" } else { "]" }
+                    )
+                }
+            }
+            Self::List {
+                min_len,
+                max_len,
+                lo,
+                hi,
+            } => format!(
+                "{min_len} to {max_len} factors in [{}, {}]",
+                num(lo),
+                num(hi)
+            ),
+        };
+        if !unit.is_empty() {
+            let _ = write!(s, " {unit}");
+        }
+        s
+    }
+
+    /// `(from, to)` for a ROS `IntegerRange` / `FloatingPointRange`: both ends finite.
+    pub fn bounds(&self) -> Option<(f64, f64)> {
+        match *self {
+            Self::Int(lo, hi) => Some((lo as f64, hi as f64)),
+            Self::Float { lo, hi, .. } if hi.is_finite() => Some((lo, hi)),
+            _ => None,
+        }
+    }
+
+    /// Whether a real is inside.
+    pub fn contains_f64(&self, v: f64) -> bool {
+        match *self {
+            Self::Any => true,
+            Self::Int(lo, hi) => v.fract() == 0.0 && v >= lo as f64 && v <= hi as f64,
+            Self::Float {
+                lo,
+                hi,
+                open_lo,
+                open_hi,
+            } => {
+                v.is_finite()
+                    && if open_lo { v > lo } else { v >= lo }
+                    && if open_hi { v < hi } else { v <= hi }
+            }
+            Self::List { lo, hi, .. } => v.is_finite() && v >= lo && v <= hi,
+        }
+    }
+}
+
+impl KeySpec {
+    /// The accepted values in words: the range (with the unit) and the constraints on
+    /// other keys.
+    pub fn constraints(&self) -> String {
+        self.constraints_in(self.unit)
+    }
+
+    /// [`Self::constraints`] with the range's unit written as `unit` ("" = none).
+    pub fn constraints_in(&self, unit: &str) -> String {
+        let words = match self.kind {
+            Kind::Choice(c) => format!(
+                "one of {}",
+                c.iter()
+                    .map(|c| format!("`{c}`"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            _ => self.range.words(unit),
+        };
+        match (words.is_empty(), self.cross.is_empty()) {
+            (_, true) => words,
+            (true, false) => self.cross.to_string(),
+            (false, false) => format!("{words}, {}", self.cross),
+        }
+    }
+
+    fn refuse(&self, value: impl ToString) -> ConfigError {
+        ConfigError::OutOfRange {
+            field: self.name,
+            value: value.to_string(),
+            expected: self.range.words(self.unit),
+        }
+    }
+
+    /// Checks an integer value against the range.
+    ///
+    /// # Errors
+    /// [`ConfigError::OutOfRange`] naming the key and its range.
+    pub fn check_int(&self, v: usize) -> Result<(), ConfigError> {
+        let ok = match self.range {
+            Range::Int(lo, hi) => (lo..=hi).contains(&(v as u64)),
+            _ => true,
+        };
+        if ok {
+            Ok(())
+        } else {
+            Err(self.refuse(v))
+        }
+    }
+
+    /// Checks a real value against the range.
+    ///
+    /// # Errors
+    /// [`ConfigError::OutOfRange`] naming the key and its range.
+    pub fn check_float(&self, v: f32) -> Result<(), ConfigError> {
+        if self.range.contains_f64(f64::from(v)) {
+            Ok(())
+        } else {
+            Err(self.refuse(v))
+        }
+    }
+
+    /// Checks a list of reals against the range (its length and every value).
+    ///
+    /// # Errors
+    /// [`ConfigError::OutOfRange`] naming the key and its range.
+    pub fn check_list(&self, v: &[f32]) -> Result<(), ConfigError> {
+        let ok = match self.range {
+            Range::List {
+                min_len, max_len, ..
+            } => {
+                (min_len..=max_len).contains(&v.len())
+                    && v.iter().all(|x| self.range.contains_f64(f64::from(*x)))
+            }
+            _ => true,
+        };
+        if ok {
+            Ok(())
+        } else {
+            Err(self.refuse(format!("{v:?}")))
+        }
+    }
+}
+
+/// The spec of key `name`.
+///
+/// # Panics
+/// When `name` is not in [`TRACKER_KEYS`] (a test runs every lookup `validate()` makes).
+#[allow(clippy::panic)]
+pub fn spec(name: &str) -> &'static KeySpec {
+    match TRACKER_KEYS.iter().find(|k| k.name == name) {
+        Some(k) => k,
+        None => panic!("tracker key {name} is not in TRACKER_KEYS"),
+    }
+}
+
+/// The keys a running tracker takes at once.
+pub fn live_keys() -> impl Iterator<Item = &'static str> {
+    TRACKER_KEYS.iter().filter(|k| k.live).map(|k| k.name)
+}
+
+const LIVE: bool = true;
+const FIXED: bool = false;
+
+const fn int(lo: u64, hi: u64) -> Range {
+    Range::Int(lo, hi)
+}
+/// `[lo, hi]`.
+const fn closed(lo: f64, hi: f64) -> Range {
+    Range::Float {
+        lo,
+        hi,
+        open_lo: false,
+        open_hi: false,
+    }
+}
+/// `(lo, hi]`.
+const fn above(lo: f64, hi: f64) -> Range {
+    Range::Float {
+        lo,
+        hi,
+        open_lo: true,
+        open_hi: false,
+    }
+}
+/// `(lo, hi)`.
+const fn open(lo: f64, hi: f64) -> Range {
+    Range::Float {
+        lo,
+        hi,
+        open_lo: true,
+        open_hi: true,
+    }
+}
+/// `n..=m` factors in `[0.25, 4]`.
+const fn factors(min_len: usize, max_len: usize) -> Range {
+    Range::List {
+        min_len,
+        max_len,
+        lo: 0.25,
+        hi: 4.0,
+    }
+}
+
+const fn key(
+    name: &'static str,
+    kind: Kind,
+    range: Range,
+    unit: &'static str,
+    live: bool,
+    doc: &'static str,
+) -> KeySpec {
+    KeySpec {
+        name,
+        kind,
+        range,
+        cross: "",
+        unit,
+        live,
+        doc,
+    }
+}
+
+const fn cross(k: KeySpec, cross: &'static str) -> KeySpec {
+    KeySpec { cross, ..k }
+}
+
+use Kind::{Bool, Float, FloatList, Int, Path};
+
+/// Every tracker key, in `config/bevt.yaml` order.
+#[rustfmt::skip]
+pub static TRACKER_KEYS: &[KeySpec] = &[
+    // features
+    key("features.kind", Kind::Choice(&["hog", "cnn"]), Range::Any, "", FIXED,
+        "Feature type: Felzenszwalb HOG (31 channels), optionally + grayscale and colour names (the fast default), or CNN layers from an ONNX model (`features.cnn`, cargo feature `cnn`: the paper's mode)."),
+    cross(key("features.hog_cell_size", Int, int(1, 16), "px", FIXED,
+        "HOG cell size, pixels (ref 4). Smaller cells are chosen for small targets."),
+        "grid side × cell <= 512 px"),
+    key("features.grayscale", Bool, Range::Any, "", FIXED,
+        "Append a grayscale channel (cell-mean luminance) to HOG."),
+    key("features.colornames", Bool, Range::Any, "", FIXED,
+        "Append the 10 colour-name channels (cell means of the embedded `w2crs` table) to HOG. Colour frames only: on mono8 frames the group is left out for the whole track."),
+    key("features.gain", Float, above(0.0, 1e4), "", FIXED,
+        "Gain on every feature value (applied with the Hann window). It sets the balance of the data term against the ADMM penalty μ, and so the scale of the responses that consensus verification compares (1 = the reference)."),
+    cross(key("features.cnn", Kind::Section, Range::Any, "", FIXED,
+        "CNN features (required when `kind` is `cnn`; see `config/cnn_*.yaml`)."),
+        "required when features.kind is cnn"),
+    // window
+    key("window.search_area_scale", Float, closed(1.0, 10.0), "× √(w·h)", FIXED,
+        "Search square side as a multiple of `sqrt(w·h)` (ref 5). Frame pixels read per scale grow with its square."),
+    key("window.padding", Float, closed(1.0, 3.0), "", FIXED,
+        "Extra factor on the patch side (ref 1.2)."),
+    cross(key("window.filter_max_area", Float, closed(16.0, 65536.0), "cells²", FIXED,
+        "Largest filter area, cells² (ref 50² = 2500); larger searches are downscaled."),
+        "sqrt(window.filter_max_area) · window.padding <= 128 cells"),
+    key("window.cell_selection_thresh", Float, above(0.0, 1.0), "", FIXED,
+        "Choose a smaller cell when the search area is below this fraction of `filter_max_area` (ref 0.75² = 0.5625)."),
+    key("window.output_sigma_factor", Float, above(0.0, 1.0), "× √(target cells)", FIXED,
+        "Label σ as a fraction of `sqrt(target cells)` (ref 1/16)."),
+    // admm
+    key("admm.iterations", Int, int(1, 20), "", FIXED,
+        "Iterations per training (ref 3)."),
+    key("admm.mu_init", Float, above(0.0, 1e6), "", FIXED,
+        "Initial μ (ref 1)."),
+    key("admm.beta", Float, closed(1.0, 1000.0), "", FIXED,
+        "μ growth β (ref run_BEVT.m: 20; a comment there says 10)."),
+    cross(key("admm.mu_max", Float, above(0.0, 1e9), "", FIXED,
+        "Largest μ (ref 10000)."),
+        ">= admm.mu_init"),
+    key("admm.lambda", Float, closed(0.0, 1e6), "", FIXED,
+        "Ridge λ of the `none` penalty (BACF 0.01)."),
+    key("admm.penalty", Kind::Choice(&["matrix", "elementwise", "none"]), Range::Any, "", FIXED,
+        "Penalty form: `matrix` (reference), `elementwise` (a diagonal spatial penalty, the paper's eq. 8 at the magnitude `spatial_weight`), `none` (BACF)."),
+    key("admm.spatial_weight", Float, closed(0.0, 1e6), "", FIXED,
+        "Magnitude κ of the `elementwise` penalty: its h-step divides by `κ·p² + μ`, `p` the penalty window (0.1 at the target centre, 0.8 at its edge). The literal eq. 8 is κ = 2/T (T = grid cells, ~1/1800): no effect against μ ≥ 1. κ = 100 weighs the target edge ~64× the first μ (in the spirit of SRDCF/STRCF weights). Unitless."),
+    key("admm.temporal", Float, closed(0.0, 1e6), "units of μ", FIXED,
+        "Weight θ of the temporal regularisation `θ/2‖ĝ − ĝ_prev‖²` (STRCF/AutoTrack; in the units of μ; 0 = none, the reference)."),
+    key("admm.reg_window_min", Float, closed(0.0, 1e6), "", FIXED,
+        "Penalty window minimum at the target centre (ref 0.1)."),
+    cross(key("admm.reg_window_edge", Float, closed(0.0, 1e6), "", FIXED,
+        "Penalty window value at the target edge (ref 0.8)."),
+        ">= admm.reg_window_min"),
+    // detection
+    key("detection.scale_estimator", Kind::Choice(&["search", "filter"]), Range::Any, "", FIXED,
+        "`search` (reference: the translation filter on `number_of_scales` patches) or `filter` (one patch, separate scale filter)."),
+    cross(key("detection.number_of_scales", Int, int(1, 33), "", FIXED,
+        "Scales tried per frame by `search` (ref 5; checked whatever the estimator)."),
+        "number_of_scales · patch side² <= 2 M pixels per frame"),
+    key("detection.scale_step", Float, open(1.0, 2.0), "", FIXED,
+        "Ratio between neighbouring scales (ref 1.01)."),
+    key("detection.newton_iterations", Int, int(0, 100), "", LIVE,
+        "Newton iterations of the sub-cell peak (ref 50; stops early once converged)."),
+    key("detection.scale_penalty", Float, above(0.0, 1.0), "", FIXED,
+        "Multiplies the peak of a scale `k` steps from the current one by `penalty^k` before the scales compete (1 = the reference: no penalty). Damps scale jitter from noise."),
+    // scale_filter
+    key("scale_filter.scales", Int, int(3, 65), "", FIXED,
+        "Scales sampled per frame (fDSST 17)."),
+    cross(key("scale_filter.interpolated_scales", Int, int(3, 257), "", FIXED,
+        "Scales after Fourier interpolation (fDSST 33), ≥ `scales`."),
+        ">= scale_filter.scales"),
+    key("scale_filter.step", Float, open(1.0, 1.5), "", FIXED,
+        "Ratio between neighbouring interpolated scales (fDSST 1.02)."),
+    key("scale_filter.learning_rate", Float, above(0.0, 1.0), "per frame", FIXED,
+        "Learning rate of the scale model (fDSST 0.025)."),
+    key("scale_filter.sigma_factor", Float, above(0.0, 10.0), "× interpolated_scales", FIXED,
+        "Scale label σ as a fraction of `interpolated_scales` (fDSST 1/16)."),
+    key("scale_filter.lambda", Float, closed(0.0, f64::INFINITY), "", FIXED,
+        "Ridge of the detection denominator (fDSST 0.01)."),
+    cross(key("scale_filter.sample_side", Int, int(2, 256), "px", FIXED,
+        "Side of each (square) scale sample, pixels (fDSST: area 32·16 = 512 px²)."),
+        ">= 2 · scale_filter.cell_size"),
+    key("scale_filter.cell_size", Int, int(1, 16), "px", FIXED,
+        "HOG cell of the scale samples, pixels (fDSST 4)."),
+    key("scale_filter.padding", Float, closed(1.0, 4.0), "× target box", FIXED,
+        "Each scale sample covers the target box times this factor (fDSST 1: the box only)."),
+    key("scale_filter.colornames", Bool, Range::Any, "", FIXED,
+        "Append the 10 colour-name channels per cell to the scale samples' fHOG (colour frames only; fDSST: fHOG only)."),
+    // learning
+    key("learning.rate", Float, closed(0.0, 1.0), "per frame", LIVE,
+        "Base rate η (ref 0.013)."),
+    key("learning.reinforced_rate", Float, closed(0.0, 1.0), "per frame", LIVE,
+        "Reinforced rate when consensus ≥ `threshold_high` (ref 0.019)."),
+    key("learning.training_sample", Kind::Choice(&["fresh", "shifted"]), Range::Any, "", FIXED,
+        "`fresh` (reference: a new patch at the new position) or `shifted` (the detection sample shifted in the Fourier domain, half the feature work)."),
+    // verification
+    key("verification.enabled", Bool, Range::Any, "", LIVE,
+        "Off: learn every frame at the base rate (ablation)."),
+    key("verification.score", Kind::Choice(&["reference", "confidence"]), Range::Any, "", FIXED,
+        "The score that gates learning: `confidence` (the per-frame confidence, default) or `reference` (the consensus `C` with `threshold_low`/`threshold_high`, paper fidelity)."),
+    key("verification.norm", Kind::Choice(&["spectral", "frobenius_sq"]), Range::Any, "", FIXED,
+        "`spectral` (reference) or `frobenius_sq` (paper)."),
+    key("verification.threshold_low", Float, closed(0.0, 1.0), "", LIVE,
+        "At or below: do not learn (ref 0.20)."),
+    cross(key("verification.threshold_high", Float, closed(0.0, 1.0), "", LIVE,
+        "At or above: learn with the reinforced rate (ref 0.50)."),
+        ">= verification.threshold_low"),
+    key("verification.response_model_rate", Float, closed(0.0, 1.0), "per frame", LIVE,
+        "Rate γ of the ideal response model (ref 0.013)."),
+    key("verification.gate_low", Float, closed(0.0, 10.0), "× reference level", LIVE,
+        "`score: confidence`: a frame whose score is below this fraction of the running reference level is not learned (a sudden drop, e.g. an occlusion)."),
+    cross(key("verification.gate_high", Float, closed(0.0, 10.0), "× reference level", LIVE,
+        "`score: confidence`: at or above this fraction of the reference, learn at the reinforced rate (below it, the base rate)."),
+        ">= verification.gate_low"),
+    key("verification.max_consecutive_skips", Int, int(0, 10_000), "frames", LIVE,
+        "`score: confidence`: frames skipped in a row after which one frame is learned at the base rate anyway, so verification never locks the tracker out of learning."),
+    // confidence
+    key("confidence.measure", Kind::Choice(&["peak", "psr", "peak_psr"]), Range::Any, "", FIXED,
+        "`peak`, `psr` or `peak_psr` (geometric mean), each relative to its running reference."),
+    key("confidence.half_score", Float, above(0.0, 1e6), "", LIVE,
+        "Score at which the confidence is 0.5 (`peak_psr`: 5; `peak`: about 0.5; `psr`: about 8); confidence = score / (score + half_score)."),
+    key("confidence.warmup_frames", Int, int(1, 10_000), "frames", FIXED,
+        "Frames (after the initial one) whose mean is the learning gate's first reference level; no frame of the warm-up is skipped."),
+    key("confidence.reference_rate", Float, closed(0.0, 1.0), "per frame", LIVE,
+        "Running-average rate of the gate's reference level, per frame (0–1)."),
+    key("confidence.psr_exclusion_cells", Int, int(0, 64), "cells", FIXED,
+        "Half-side of the square around the peak left out of the PSR sidelobe, cells."),
+    // track_state
+    key("track_state.lost_threshold", Float, closed(0.0, 1.0), "", LIVE,
+        "Confidence below this is unconfident (0–1)."),
+    key("track_state.lost_frames", Int, int(1, 10_000), "frames", LIVE,
+        "Unconfident frames in a row that make the target lost."),
+    // redetection
+    key("redetection.enabled", Bool, Range::Any, "", FIXED,
+        "Search the frame for a lost target; off: only the window at the last known position is searched (with the same confirmation), at the scale of the loss."),
+    key("redetection.windows_per_frame", Int, int(1, 256), "windows", LIVE,
+        "Search windows evaluated per lost frame (the time bound; one window costs about one scale of a normal frame)."),
+    key("redetection.scales", FloatList, factors(1, 8), "× scale at the loss", FIXED,
+        "Scales tried, relative to the target scale when it was lost."),
+    key("redetection.tile_stride", Float, closed(0.1, 1.0), "window sides", FIXED,
+        "Distance between tile centres, fraction of the search-window side."),
+    key("redetection.reacquire_threshold", Float, closed(0.0, 1.0), "", LIVE,
+        "Confidence at or above which a window is a candidate (0–1)."),
+    key("redetection.reacquire_relative", Float, closed(0.0, 1.0), "", LIVE,
+        "A candidate's score must also reach this fraction of the learning gate's reference level frozen on the last confident frame (0–1; 0 = off): a look-alike that the frozen filter scores far below the target it was tracking is not taken, whatever its absolute confidence."),
+    key("redetection.reacquire_frames", Int, int(1, 10_000), "frames", LIVE,
+        "Frames in a row a candidate must stay confident before the track is taken back."),
+    cross(key("redetection.proposals", Int, int(0, 256), "windows", FIXED,
+        "Of `windows_per_frame`, how many go to whole-frame template-match proposals each lost frame (0 = none: only the tile walk)."),
+        "<= redetection.windows_per_frame"),
+    key("redetection.verifier", Kind::Choice(&["none", "nanotrack", "nanotrack_ort"]), Range::Any, "", FIXED,
+        "A learned verifier that searches the frame while lost, besides the filter (`none`; `nanotrack`: NanoTrack v2 run in pure Rust, in every build; `nanotrack_ort`: the same on ONNX Runtime, cargo feature `cnn`)."),
+    key("redetection.verifier_backbone", Path, Range::Any, "", FIXED,
+        "The verifier's backbone (ONNX; NanoTrack v2, any input size); empty: the NanoTrack v2 backbone embedded in the library."),
+    key("redetection.verifier_head", Path, Range::Any, "", FIXED,
+        "The verifier's correlation head (ONNX); empty: the embedded NanoTrack v2 head."),
+    key("redetection.verifier_windows", Int, int(1, 256), "passes", FIXED,
+        "Verifier network passes per lost frame (the time bound of the verifier; one pass is one backbone run on a 255×255 search crop plus one head run)."),
+    key("redetection.verifier_scales", FloatList, factors(1, 8), "× scale at the loss", FIXED,
+        "Scales of the verifier's whole-frame tiles, relative to the target scale when it was lost."),
+    key("redetection.verifier_threshold", Float, closed(-100.0, 100.0), "logit margin", FIXED,
+        "Foreground logit margin (head classification, foreground − background) at or above which a verifier hit is a candidate."),
+    // threads
+    key("threads", Int, int(1, 256), "threads", FIXED,
+        "Worker threads for the per-scale work of one frame (1 = sequential). Work runs on the caller's rayon pool; the core spawns no threads itself."),
+];
