@@ -345,7 +345,7 @@ impl NodeCore {
         self.settings.stale_timeout = s.stale_timeout;
     }
 
-    /// Takes a tracker specification that differs in `bevt_core::config::LIVE_KEYS` only:
+    /// Takes a tracker specification that differs in live keys only (`bevt_core::config::live_keys`):
     /// the running track uses it from the next frame, and new tracks are built with it.
     ///
     /// # Errors

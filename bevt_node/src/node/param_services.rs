@@ -1030,6 +1030,46 @@ mod tests {
     }
 
     #[test]
+    fn the_shipped_parameters_file_lists_the_node_table_with_its_defaults() {
+        let text = include_str!("../../../config/node.yaml");
+        let file = crate::node::node_params::params_from_file(text, "bevt_node").unwrap();
+        let p = params();
+        let d = p.declared();
+        let mut listed = Vec::new();
+        for (k, v) in &file {
+            if k.starts_with(TRACKER) {
+                continue;
+            }
+            assert!(
+                NODE_KEYS.iter().any(|n| n.name == k),
+                "{k} is not in NODE_KEYS"
+            );
+            let value = match v {
+                Value::Sequence(s) => ParamValue::StringArray(
+                    s.iter().map(|x| x.as_str().unwrap().to_string()).collect(),
+                ),
+                other => param_of_yaml(other).unwrap(),
+            };
+            assert_eq!(
+                value, d[k].value,
+                "config/node.yaml: {k} is not the default"
+            );
+            listed.push(k.as_str());
+        }
+        // domain_id is unset by default (ROS_DOMAIN_ID), use_sim_time is not supported.
+        for k in NODE_KEYS
+            .iter()
+            .filter(|k| k.served && !["domain_id", "use_sim_time"].contains(&k.name))
+        {
+            assert!(
+                listed.contains(&k.name),
+                "{} missing from config/node.yaml",
+                k.name
+            );
+        }
+    }
+
+    #[test]
     fn list_follows_rclcpp() {
         let p = params();
         let all = p.list(&[], 0);
