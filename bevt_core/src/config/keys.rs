@@ -464,7 +464,7 @@ pub static TRACKER_KEYS: &[KeySpec] = &[
         "`score: confidence`: frames skipped in a row after which one frame is learned at the base rate anyway, so verification never locks the tracker out of learning."),
     // confidence
     key("confidence.measure", Kind::Choice(&["peak", "psr", "peak_psr"]), Range::Any, "", FIXED,
-        "`peak`, `psr` or `peak_psr` (geometric mean), each relative to its running reference."),
+        "`peak_psr` (r·q), `peak` (r: peak over the initial filter's in-sample peak) or `psr` (q: peak-to-sidelobe ratio); absolute, no running reference."),
     key("confidence.half_score", Float, above(0.0, 1e6), "", LIVE,
         "Score at which the confidence is 0.5 (`peak_psr`: 5; `peak`: about 0.5; `psr`: about 8); confidence = score / (score + half_score)."),
     key("confidence.warmup_frames", Int, int(1, 10_000), "frames", FIXED,
@@ -475,7 +475,7 @@ pub static TRACKER_KEYS: &[KeySpec] = &[
         "Half-side of the square around the peak left out of the PSR sidelobe, cells."),
     // track_state
     key("track_state.lost_threshold", Float, closed(0.0, 1.0), "", LIVE,
-        "Confidence below this is unconfident (0–1)."),
+        "Confidence below this is unconfident (0–1; 0 = never)."),
     key("track_state.lost_frames", Int, int(1, 10_000), "frames", LIVE,
         "Unconfident frames in a row that make the target lost."),
     // redetection
@@ -510,5 +510,5 @@ pub static TRACKER_KEYS: &[KeySpec] = &[
         "Foreground logit margin (head classification, foreground − background) at or above which a verifier hit is a candidate."),
     // threads
     key("threads", Int, int(1, 256), "threads", FIXED,
-        "Worker threads for the per-scale work of one frame (1 = sequential). Work runs on the caller's rayon pool; the core spawns no threads itself."),
+        "Worker threads for the per-scale work of one frame (1 = sequential). Work runs on the caller's rayon pool; the core spawns no threads itself. With the scale filter (the default) there is one patch per frame, so it gains nothing."),
 ];
