@@ -6,6 +6,10 @@
 //! descriptors and `docs/configuration.md`. Defaults are `TrackerConfig::default()` (equal
 //! to `config/bevt.yaml`, a test checks it). Constraints between keys that a range cannot
 //! state are code in `validate()`; the table only names them in words ([`KeySpec::cross`]).
+//!
+//! The descriptions users see are the table's [`KeySpec::doc`]; the doc comments of the
+//! `*Config` fields are for Rust readers and are not read by anything. A change to what a
+//! key does goes in both (no test can compare them without parsing source).
 
 use crate::error::ConfigError;
 use std::fmt::Write as _;
