@@ -263,10 +263,99 @@ mod topics_and_bad_input {
     use bevt_node::node::sim::{wall_stamp, RawPeer};
     use bevt_tests::{synth_image as image, wait_status};
 
+    /// `image_transport` subscribes exactly the configured input: with `raw` (the
+    /// default) a compressed frame gets no status while a raw one does; with `compressed`
+    /// the other way round.
+    #[test]
+    fn image_transport_subscribes_only_the_configured_input() {
+        use bevt_node::node::ros::ImageTransport;
+        let seq = SynthParams::default();
+        for (transport, raw_taken) in [
+            (ImageTransport::Raw, true),
+            (ImageTransport::Compressed, false),
+        ] {
+            let settings = RosSettings {
+                domain_id: bevt_tests::dds_domain(),
+                image_transport: transport,
+                ..RosSettings::default()
+            };
+            let stop = Arc::new(AtomicBool::new(false));
+            let core = NodeCore::new(
+                TrackerConfig::default().validate().unwrap(),
+                node_settings(),
+            );
+            let (s2, st2) = (settings.clone(), stop.clone());
+            let node = std::thread::spawn(move || run(core, &s2, st2, |_| {}).unwrap());
+            let peer = RawPeer::new(&settings).unwrap();
+            let gs = GroundStation::new(&settings).unwrap();
+            let png = |t: usize| {
+                let (m, _) = image(&seq, t);
+                let mut data = Vec::new();
+                image::RgbImage::from_raw(m.width, m.height, m.data.clone())
+                    .unwrap()
+                    .write_to(
+                        &mut std::io::Cursor::new(&mut data),
+                        image::ImageFormat::Png,
+                    )
+                    .unwrap();
+                CompressedImage {
+                    header: m.header,
+                    format: "png".into(),
+                    data,
+                }
+            };
+            // The configured input: sent until reported (discovery, first samples).
+            let end = Instant::now() + Duration::from_secs(15);
+            loop {
+                let stamp = if raw_taken {
+                    let (m, _) = image(&seq, 0);
+                    peer.image(m.clone());
+                    m.header.stamp
+                } else {
+                    let c = png(0);
+                    peer.compressed(c.clone());
+                    c.header.stamp
+                };
+                if wait_status(&gs, Duration::from_millis(200), |s| s.header.stamp == stamp)
+                    .is_some()
+                {
+                    break;
+                }
+                assert!(
+                    Instant::now() < end,
+                    "{transport:?}: the configured input was never reported"
+                );
+            }
+            // Discovery is done: the other input is not read.
+            let mut stamps = Vec::new();
+            for t in 1..8 {
+                if raw_taken {
+                    let c = png(t);
+                    stamps.push(c.header.stamp);
+                    peer.compressed(c);
+                } else {
+                    let (m, _) = image(&seq, t);
+                    stamps.push(m.header.stamp);
+                    peer.image(m);
+                }
+                std::thread::sleep(Duration::from_millis(100));
+            }
+            assert!(
+                wait_status(&gs, Duration::from_secs(1), |s| stamps
+                    .contains(&s.header.stamp))
+                .is_none(),
+                "{transport:?}: the other input was read"
+            );
+            stop.store(true, Ordering::Relaxed);
+            node.join().unwrap();
+        }
+    }
+
     #[test]
     fn init_topic_compressed_input_and_bad_images_over_dds() {
         let settings = RosSettings {
             domain_id: bevt_tests::dds_domain(),
+            image_transport: bevt_node::node::ros::ImageTransport::Both,
             ..RosSettings::default()
         };
         let stop = Arc::new(AtomicBool::new(false));

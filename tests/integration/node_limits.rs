@@ -12,7 +12,7 @@ use bevt_msgs::std_msgs::Header;
 use bevt_msgs::RosType;
 use bevt_node::convert::reinit_request;
 use bevt_node::node::app::{NodeCore, NodeSettings};
-use bevt_node::node::ros::{camera_qos, context, ros_name, run, RosSettings};
+use bevt_node::node::ros::{camera_qos, context, ros_name, run, ImageTransport, RosSettings};
 use bevt_node::node::sim::{spawn_camera, wall_stamp, GroundStation, RawPeer};
 use bevt_tests::{synth_image as image, wait_status};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -53,6 +53,8 @@ impl Drop for Node {
 fn settings() -> RosSettings {
     RosSettings {
         domain_id: bevt_tests::dds_domain(),
+        // The bomb set has raw and compressed images.
+        image_transport: ImageTransport::Both,
         ..RosSettings::default()
     }
 }
@@ -650,7 +652,13 @@ fn a_separate_node_process_stays_within_twice_its_steady_memory_under_the_bomb_s
     let s = settings();
     // The node as its own process (stops when its stdin closes).
     let mut child = Command::new(env!("CARGO_BIN_EXE_bevt_node_under_test"))
-        .args(["--ros-args", "-p", &format!("domain_id:={}", s.domain_id)])
+        .args([
+            "--ros-args",
+            "-p",
+            &format!("domain_id:={}", s.domain_id),
+            "-p",
+            "image_transport:=both",
+        ])
         .stdin(Stdio::piped())
         .stdout(Stdio::null())
         .stderr(Stdio::null())

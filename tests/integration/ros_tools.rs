@@ -72,6 +72,7 @@ fn a_remapped_raw_topic_takes_the_compressed_input_with_it() {
     let settings = RosSettings {
         domain_id: bevt_tests::dds_domain(),
         remaps: vec![("image_raw".into(), "/camera/image_raw".into())],
+        image_transport: bevt_node::node::ros::ImageTransport::Compressed,
         ..RosSettings::default()
     };
     let _node = start(&settings);

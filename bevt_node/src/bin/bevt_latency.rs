@@ -11,8 +11,8 @@ use bevt_core::TrackerConfig;
 use bevt_msgs::builtin_interfaces::Time;
 use bevt_node::convert::reinit_request;
 use bevt_node::node::app::{NodeCore, NodeSettings};
-use bevt_node::node::ros::{run, RosSettings};
-use bevt_node::node::sim::{spawn_camera, wall_stamp, GroundStation};
+use bevt_node::node::ros::{run, ImageTransport, RosSettings};
+use bevt_node::node::sim::{spawn_camera_as, wall_stamp, GroundStation};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.iter().any(|a| a == "-h" || a == "--help") {
-        println!("bevt_latency: latency of the ROS 2 node over DDS on loopback (a benchmark, not a test)\n\nUsage: bevt_latency [SECONDS (20)] [RATE_HZ (30)] [DOMAIN (77)]\n\nA synthetic camera publishes 1280x720 rgb8 frames at RATE_HZ for SECONDS; the node tracks;\na ground station measures image stamp -> detection arrival and prints p50/p90/p99/max.");
+        println!("bevt_latency: latency of the ROS 2 node over DDS on loopback (a benchmark, not a test)\n\nUsage: bevt_latency [SECONDS (20)] [RATE_HZ (30)] [DOMAIN (77)] [raw | jpeg (raw)]\n\nA synthetic camera publishes 1280x720 frames at RATE_HZ for SECONDS, rgb8 on image_raw or JPEG\n(quality 90) on image_raw/compressed, the node subscribed to that input (image_transport);\nthe node tracks; a ground station measures image stamp -> detection arrival and prints\np50/p90/p99/max.");
         return Ok(());
     }
     let seconds: f64 = args
@@ -35,8 +35,18 @@ fn main() -> Result<()> {
         .get(2)
         .map_or(Ok(77), |s| s.parse())
         .context("DOMAIN")?;
+    let jpeg = match args.get(3).map(String::as_str) {
+        None | Some("raw") => false,
+        Some("jpeg") => true,
+        Some(other) => anyhow::bail!("the input is raw or jpeg, not {other}"),
+    };
     let settings = RosSettings {
         domain_id: domain,
+        image_transport: if jpeg {
+            ImageTransport::Compressed
+        } else {
+            ImageTransport::Raw
+        },
         ..RosSettings::default()
     };
     let stop = Arc::new(AtomicBool::new(false));
@@ -57,8 +67,9 @@ fn main() -> Result<()> {
         ..SynthParams::default()
     };
     let seq_frames = seq.frames;
-    println!("rendering and publishing 1280x720 rgb8 at {rate} Hz on domain {domain} for {seconds} s ...");
-    let (camera, truth) = spawn_camera(&settings, seq, rate, stop.clone())?;
+    let input = if jpeg { "JPEG" } else { "rgb8" };
+    println!("rendering and publishing 1280x720 {input} at {rate} Hz on domain {domain} for {seconds} s ...");
+    let (camera, truth) = spawn_camera_as(&settings, seq, rate, stop.clone(), jpeg.then_some(90))?;
     let gs = GroundStation::new(&settings)?;
     // Measure only once the camera has rendered its whole loop (rendering competes for the
     // CPU) and discovery has settled.

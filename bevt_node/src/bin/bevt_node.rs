@@ -277,8 +277,12 @@ fn run() -> Result<()> {
         return demo(launch, stop);
     }
     eprintln!(
-        "bevt_node: domain {}, namespace {}, interfaces {:?}, services {:?}",
-        launch.ros.domain_id, launch.ros.namespace, launch.ros.networks, launch.ros.service_mapping
+        "bevt_node: domain {}, namespace {}, interfaces {:?}, services {:?}, camera input {}",
+        launch.ros.domain_id,
+        launch.ros.namespace,
+        launch.ros.networks,
+        launch.ros.service_mapping,
+        launch.ros.image_transport.name()
     );
     let core = NodeCore::new(launch.tracker.clone(), launch.node.clone());
     ros::run(core, &launch.ros, stop, |_| {})?;

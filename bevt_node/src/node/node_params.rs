@@ -260,6 +260,8 @@ pub static NODE_KEYS: &[NodeKey] = &[
         "Largest DDS sample reassembled from fragments, bytes: at least the largest image message.") },
     nk("service_mapping", NodeType::String, NodeRange::Choice(&["enhanced", "cyclone"]), "", FIXED,
         "Service wire mapping: enhanced (Fast DDS, rmw_fastrtps) or cyclone (rmw_cyclonedds)."),
+    nk("image_transport", NodeType::String, NodeRange::Choice(&["raw", "compressed", "both"]), "", FIXED,
+        "Camera input subscribed, as image_transport's parameter: raw (image_raw), compressed (image_raw/compressed) or both (a camera publishing both then delivers every frame twice)."),
     nk("max_image_width", NodeType::Integer, NodeRange::Int(16, 32768), "px", FIXED,
         "Widest camera frame accepted, pixels (larger frames are refused before decoding)."),
     nk("max_image_height", NodeType::Integer, NodeRange::Int(16, 32768), "px", FIXED,
@@ -606,6 +608,12 @@ fn apply_param(
                     ))
                 }
             }
+        }
+        "image_transport" => {
+            ros_settings.image_transport = v
+                .as_str()
+                .and_then(crate::node::ros::ImageTransport::parse)
+                .ok_or_else(|| param_err(k, format!("expected {}", node_key(k).range_words())))?
         }
         "max_image_width" => node.image_limits.max_width = int_in(k, v, int_range(k))? as u32,
         "max_image_height" => node.image_limits.max_height = int_in(k, v, int_range(k))? as u32,

@@ -245,6 +245,7 @@ impl NodeParams {
                 }
                 .into(),
             ),
+            "image_transport" => ParamValue::String(r.image_transport.name().into()),
             "max_image_width" => ParamValue::Integer(i64::from(n.image_limits.max_width)),
             "max_image_height" => ParamValue::Integer(i64::from(n.image_limits.max_height)),
             "max_image_pixels" => ParamValue::Integer(n.image_limits.max_pixels as i64),

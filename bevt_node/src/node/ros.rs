@@ -177,6 +177,8 @@ pub struct RosSettings {
     pub diagnostics_period: Duration,
     /// `debug_image` rate, Hz (0 = not published).
     pub debug_image_rate_hz: f64,
+    /// Which camera input is subscribed (`image_transport`).
+    pub image_transport: ImageTransport,
     /// DDS Security: off, or the enclave whose files secure the participant
     /// ([`crate::node::security`]).
     pub security: DdsSecurity,
@@ -194,8 +196,48 @@ impl Default for RosSettings {
             remaps: Vec::new(),
             diagnostics_period: Duration::from_secs(1),
             debug_image_rate_hz: 0.0,
+            image_transport: ImageTransport::Raw,
             security: DdsSecurity::default(),
         }
+    }
+}
+
+/// The camera input the node subscribes to, as image_transport's `image_transport`
+/// parameter chooses it for a subscriber (default `raw`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ImageTransport {
+    /// `image_raw` (`sensor_msgs/Image`) only.
+    Raw,
+    /// `image_raw/compressed` (`sensor_msgs/CompressedImage`) only.
+    Compressed,
+    /// Both: for a setup where some cameras publish raw and others compressed on the same
+    /// name. A camera that publishes both delivers every frame twice.
+    Both,
+}
+
+impl ImageTransport {
+    /// The parameter's spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Raw => "raw",
+            Self::Compressed => "compressed",
+            Self::Both => "both",
+        }
+    }
+
+    /// From the parameter's spelling.
+    pub fn parse(s: &str) -> Option<Self> {
+        [Self::Raw, Self::Compressed, Self::Both]
+            .into_iter()
+            .find(|t| t.name() == s)
+    }
+
+    fn raw(self) -> bool {
+        matches!(self, Self::Raw | Self::Both)
+    }
+
+    fn compressed(self) -> bool {
+        matches!(self, Self::Compressed | Self::Both)
     }
 }
 
@@ -409,10 +451,11 @@ fn debug_publisher(node: &mut Node, settings: &RosSettings) -> Result<Publisher<
         .map_err(create_err("debug image publisher"))
 }
 
-/// The raw and compressed camera subscriptions, handed to the reception thread.
+/// The camera subscriptions (those `image_transport` asks for), handed to the reception
+/// thread.
 struct CameraSubscriptions {
-    raw: Subscription<Image>,
-    compressed: Subscription<CompressedImage>,
+    raw: Option<Subscription<Image>>,
+    compressed: Option<Subscription<CompressedImage>>,
 }
 
 /// Creates the node and all its topics, subscriptions, publishers and services.
@@ -463,12 +506,24 @@ fn create_endpoints(settings: &RosSettings) -> Result<(Endpoints, CameraSubscrip
     } else {
         None
     };
-    let sub_img = node
-        .create_subscription::<Image>(&t_img, Some(cq.clone()))
-        .map_err(create_err("image subscription"))?;
-    let sub_cmp = node
-        .create_subscription::<CompressedImage>(&t_cmp, Some(cq.clone()))
-        .map_err(create_err("compressed image subscription"))?;
+    // Only the configured input is subscribed: a camera publishing both would otherwise
+    // hand every frame over twice (and the compressed one through a decoder).
+    let sub_img = if settings.image_transport.raw() {
+        Some(
+            node.create_subscription::<Image>(&t_img, Some(cq.clone()))
+                .map_err(create_err("image subscription"))?,
+        )
+    } else {
+        None
+    };
+    let sub_cmp = if settings.image_transport.compressed() {
+        Some(
+            node.create_subscription::<CompressedImage>(&t_cmp, Some(cq.clone()))
+                .map_err(create_err("compressed image subscription"))?,
+        )
+    } else {
+        None
+    };
     let sub_init = node
         .create_subscription::<Detection2D>(&t_init, Some(oq.clone()))
         .map_err(create_err("init subscription"))?;
@@ -551,16 +606,31 @@ fn spawn_reception(
                 _ => {}
             }
             futures::executor::block_on(async move {
-                let raw = camera.raw.async_stream().map(|r| match r {
-                    Ok((m, _)) => Incoming::Raw(m, Instant::now()),
-                    Err(e) => Incoming::Error(format!("cannot read an image message: {e:?}")),
-                });
-                let cmp = camera.compressed.async_stream().map(|r| match r {
-                    Ok((m, _)) => Incoming::Compressed(m, Instant::now()),
-                    Err(e) => {
-                        Incoming::Error(format!("cannot read a compressed image message: {e:?}"))
-                    }
-                });
+                // An input that is not subscribed is a stream that never yields.
+                let raw = match &camera.raw {
+                    Some(sub) => sub
+                        .async_stream()
+                        .map(|r| match r {
+                            Ok((m, _)) => Incoming::Raw(m, Instant::now()),
+                            Err(e) => {
+                                Incoming::Error(format!("cannot read an image message: {e:?}"))
+                            }
+                        })
+                        .left_stream(),
+                    None => futures::stream::pending().right_stream(),
+                };
+                let cmp = match &camera.compressed {
+                    Some(sub) => sub
+                        .async_stream()
+                        .map(|r| match r {
+                            Ok((m, _)) => Incoming::Compressed(m, Instant::now()),
+                            Err(e) => Incoming::Error(format!(
+                                "cannot read a compressed image message: {e:?}"
+                            )),
+                        })
+                        .left_stream(),
+                    None => futures::stream::pending().right_stream(),
+                };
                 let mut both = std::pin::pin!(futures::stream::select(raw, cmp));
                 while let Some(item) = both.next().await {
                     if shutdown.load(Ordering::Relaxed) {

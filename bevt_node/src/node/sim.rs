@@ -57,26 +57,65 @@ pub fn spawn_camera(
     rate_hz: f64,
     stop: Arc<AtomicBool>,
 ) -> Result<(std::thread::JoinHandle<()>, TruthLog), RosError> {
+    spawn_camera_as(settings, seq, rate_hz, stop, None)
+}
+
+/// [`spawn_camera`], publishing `sensor_msgs/CompressedImage` JPEG of this quality (1..=100)
+/// on `image_raw/compressed` instead when `jpeg_quality` is set. Frames are encoded once,
+/// when first rendered, so the camera's own cost does not grow.
+///
+/// # Errors
+/// [`RosError`] when DDS entities cannot be created.
+pub fn spawn_camera_as(
+    settings: &RosSettings,
+    seq: SynthParams,
+    rate_hz: f64,
+    stop: Arc<AtomicBool>,
+    jpeg_quality: Option<u8>,
+) -> Result<(std::thread::JoinHandle<()>, TruthLog), RosError> {
     let ctx = context(settings)?;
     let mut cam = node(&ctx, "bevt_sim_camera")?;
+    let create = |what: &'static str| {
+        move |e: ros2_client::CreateError| RosError::Create {
+            what: what.into(),
+            reason: format!("{e:?}"),
+        }
+    };
     // The node's input name, resolved in its namespace (absolute).
-    let abs = ros_name(settings, crate::node::ros::names::IMAGE)?;
-    let topic = cam
-        .create_topic(
-            &abs,
-            MessageTypeName::new(Image::PACKAGE, Image::NAME),
-            &camera_qos(),
-        )
-        .map_err(|e| RosError::Create {
-            what: "camera topic".into(),
-            reason: format!("{e:?}"),
-        })?;
-    let publisher = cam
-        .create_publisher::<Image>(&topic, Some(camera_qos()))
-        .map_err(|e| RosError::Create {
-            what: "camera publisher".into(),
-            reason: format!("{e:?}"),
-        })?;
+    let (publisher, jpeg_publisher) = match jpeg_quality {
+        None => {
+            let abs = ros_name(settings, crate::node::ros::names::IMAGE)?;
+            let topic = cam
+                .create_topic(
+                    &abs,
+                    MessageTypeName::new(Image::PACKAGE, Image::NAME),
+                    &camera_qos(),
+                )
+                .map_err(create("camera topic"))?;
+            let p = cam
+                .create_publisher::<Image>(&topic, Some(camera_qos()))
+                .map_err(create("camera publisher"))?;
+            (Some(p), None)
+        }
+        Some(_) => {
+            let abs = ros_name(settings, crate::node::ros::names::IMAGE_COMPRESSED)?;
+            let topic = cam
+                .create_topic(
+                    &abs,
+                    MessageTypeName::new("sensor_msgs", "CompressedImage"),
+                    &camera_qos(),
+                )
+                .map_err(create("camera topic"))?;
+            let p = cam
+                .create_publisher::<bevt_msgs::sensor_msgs::CompressedImage>(
+                    &topic,
+                    Some(camera_qos()),
+                )
+                .map_err(create("camera publisher"))?;
+            (None, Some(p))
+        }
+    };
+    let mut jpegs: Vec<Vec<u8>> = Vec::new();
     let log: TruthLog = Arc::default();
     let log2 = log.clone();
     let period = Duration::from_secs_f64(1.0 / rate_hz.max(0.1));
@@ -102,19 +141,38 @@ pub fn spawn_camera(
                         l.pop_first();
                     }
                 }
-                let msg = Image {
-                    header: Header {
-                        stamp,
-                        frame_id: "sim_camera".into(),
-                    },
-                    height: seq.height as u32,
-                    width: seq.width as u32,
-                    encoding: "rgb8".into(),
-                    is_bigendian: 0,
-                    step: (seq.width * 3) as u32,
-                    data: f.rgb.clone(),
+                let header = Header {
+                    stamp,
+                    frame_id: "sim_camera".into(),
                 };
-                let _ = publisher.publish(msg);
+                if let Some(publisher) = &publisher {
+                    let _ = publisher.publish(Image {
+                        header,
+                        height: seq.height as u32,
+                        width: seq.width as u32,
+                        encoding: "rgb8".into(),
+                        is_bigendian: 0,
+                        step: (seq.width * 3) as u32,
+                        data: f.rgb.clone(),
+                    });
+                } else if let (Some(publisher), Some(q)) = (&jpeg_publisher, jpeg_quality) {
+                    if i == jpegs.len() {
+                        let mut data = Vec::new();
+                        let _ = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut data, q)
+                            .encode(
+                                &f.rgb,
+                                seq.width as u32,
+                                seq.height as u32,
+                                image::ExtendedColorType::Rgb8,
+                            );
+                        jpegs.push(data);
+                    }
+                    let _ = publisher.publish(bevt_msgs::sensor_msgs::CompressedImage {
+                        header,
+                        format: "jpeg".into(),
+                        data: jpegs[i].clone(),
+                    });
+                }
                 t += 1;
                 next += period;
                 let now = Instant::now();
