@@ -257,11 +257,22 @@ fn lost_target_is_published_with_empty_detections_and_reinit_clears_it_over_dds(
 mod topics_and_bad_input {
     use super::*;
     use bevt_msgs::bevt::TrackStatus;
-    use bevt_msgs::sensor_msgs::CompressedImage;
     use bevt_msgs::vision_msgs::Detection2D;
     use bevt_node::convert::bbox_2d;
     use bevt_node::node::sim::{wall_stamp, RawPeer};
     use bevt_tests::{synth_image as image, wait_status};
+
+    /// The node with `settings` in a thread; set the flag to stop it, then join.
+    fn node_thread(settings: &RosSettings) -> (Arc<AtomicBool>, std::thread::JoinHandle<()>) {
+        let stop = Arc::new(AtomicBool::new(false));
+        let core = NodeCore::new(
+            TrackerConfig::default().validate().unwrap(),
+            node_settings(),
+        );
+        let (s2, st2) = (settings.clone(), stop.clone());
+        let node = std::thread::spawn(move || run(core, &s2, st2, |_| {}).unwrap());
+        (stop, node)
+    }
 
     /// `image_transport` subscribes exactly the configured input: with `raw` (the
     /// default) a compressed frame gets no status while a raw one does; with `compressed`
@@ -279,31 +290,10 @@ mod topics_and_bad_input {
                 image_transport: transport,
                 ..RosSettings::default()
             };
-            let stop = Arc::new(AtomicBool::new(false));
-            let core = NodeCore::new(
-                TrackerConfig::default().validate().unwrap(),
-                node_settings(),
-            );
-            let (s2, st2) = (settings.clone(), stop.clone());
-            let node = std::thread::spawn(move || run(core, &s2, st2, |_| {}).unwrap());
+            let (stop, node) = node_thread(&settings);
             let peer = RawPeer::new(&settings).unwrap();
             let gs = GroundStation::new(&settings).unwrap();
-            let png = |t: usize| {
-                let (m, _) = image(&seq, t);
-                let mut data = Vec::new();
-                image::RgbImage::from_raw(m.width, m.height, m.data.clone())
-                    .unwrap()
-                    .write_to(
-                        &mut std::io::Cursor::new(&mut data),
-                        image::ImageFormat::Png,
-                    )
-                    .unwrap();
-                CompressedImage {
-                    header: m.header,
-                    format: "png".into(),
-                    data,
-                }
-            };
+            let png = |t: usize| bevt_tests::png_image(&image(&seq, t).0);
             // The configured input: sent until reported (discovery, first samples).
             let end = Instant::now() + Duration::from_secs(15);
             loop {
@@ -358,13 +348,7 @@ mod topics_and_bad_input {
             image_transport: bevt_node::node::ros::ImageTransport::Both,
             ..RosSettings::default()
         };
-        let stop = Arc::new(AtomicBool::new(false));
-        let core = NodeCore::new(
-            TrackerConfig::default().validate().unwrap(),
-            node_settings(),
-        );
-        let (s2, st2) = (settings.clone(), stop.clone());
-        let node = std::thread::spawn(move || run(core, &s2, st2, |_| {}).unwrap());
+        let (stop, node) = node_thread(&settings);
         let peer = RawPeer::new(&settings).unwrap();
         let gs = GroundStation::new(&settings).unwrap();
         let seq = SynthParams::default();
@@ -399,16 +383,7 @@ mod topics_and_bad_input {
         }
         // Compressed frames are tracked too.
         let (m1, t1) = image(&seq, 1);
-        let mut png = Vec::new();
-        image::RgbImage::from_raw(m1.width, m1.height, m1.data.clone())
-            .unwrap()
-            .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-            .unwrap();
-        let cm = CompressedImage {
-            header: m1.header.clone(),
-            format: "png".into(),
-            data: png,
-        };
+        let cm = bevt_tests::png_image(&m1);
         peer.compressed(cm.clone());
         let s = wait_status(&gs, Duration::from_secs(5), |s| {
             s.header.stamp == m1.header.stamp

@@ -6,7 +6,7 @@ use bevt_core::TrackerConfig;
 use bevt_msgs::sensor_msgs::CompressedImage;
 use bevt_node::node::app::{NodeCore, NodeSettings};
 use bevt_node::node::ros::{camera_qos, context, run, RosSettings};
-use bevt_node::node::sim::{wall_stamp, GroundStation};
+use bevt_node::node::sim::GroundStation;
 use bevt_tests::{synth_image, wait_status};
 use ros2_client::{MessageTypeName, Name, NodeName, NodeOptions};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -47,23 +47,7 @@ fn start(settings: &RosSettings) -> Node {
 
 /// A PNG `sensor_msgs/CompressedImage` of synthetic frame `t`, stamped now.
 fn png(seq: &SynthParams, t: usize) -> CompressedImage {
-    let (m, _) = synth_image(seq, t);
-    let mut data = Vec::new();
-    image::RgbImage::from_raw(m.width, m.height, m.data)
-        .unwrap()
-        .write_to(
-            &mut std::io::Cursor::new(&mut data),
-            image::ImageFormat::Png,
-        )
-        .unwrap();
-    CompressedImage {
-        header: bevt_msgs::std_msgs::Header {
-            stamp: wall_stamp(),
-            frame_id: "cam".into(),
-        },
-        format: "png".into(),
-        data,
-    }
+    bevt_tests::png_image(&synth_image(seq, t).0)
 }
 
 #[test]

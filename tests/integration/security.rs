@@ -91,19 +91,29 @@ fn keystore(name: &str) -> Option<PathBuf> {
         .unwrap()
         .replace("/ground_station", "/observer");
     std::fs::write(forged.join("permissions.xml"), granted).unwrap();
+    sign_permissions(&forged, &rogue);
+    Some(ks)
+}
+
+/// Signs `enclave`'s `permissions.xml` into `permissions.p7s` with the permissions CA of the
+/// keystore `ca_root` (S/MIME, as sros2 and scripts/make-keystore.sh do).
+fn sign_permissions(enclave: &Path, ca_root: &Path) {
     let st = Command::new("openssl")
         .args(["smime", "-sign", "-text", "-in"])
-        .arg(forged.join("permissions.xml"))
+        .arg(enclave.join("permissions.xml"))
         .arg("-out")
-        .arg(forged.join("permissions.p7s"))
+        .arg(enclave.join("permissions.p7s"))
         .arg("-signer")
-        .arg(rogue.join("public/ca.cert.pem"))
+        .arg(ca_root.join("public/ca.cert.pem"))
         .arg("-inkey")
-        .arg(rogue.join("private/ca.key.pem"))
+        .arg(ca_root.join("private/ca.key.pem"))
         .status()
         .unwrap();
-    assert!(st.success(), "signing the forged permissions failed");
-    Some(ks)
+    assert!(
+        st.success(),
+        "signing {}/permissions.xml failed",
+        enclave.display()
+    );
 }
 
 /// ROS settings of a participant on `domain` with `enclave` of `ks` (`None`: unsecured).
@@ -747,18 +757,7 @@ fn certificate_and_permission_dates_are_checked() {
     );
     let xml = format!("{}2020-01-01T00:00:00{}", &xml[..a], &xml[b..]);
     std::fs::write(expired_grant.join("permissions.xml"), xml).unwrap();
-    let st = Command::new("openssl")
-        .args(["smime", "-sign", "-text", "-in"])
-        .arg(expired_grant.join("permissions.xml"))
-        .arg("-out")
-        .arg(expired_grant.join("permissions.p7s"))
-        .arg("-signer")
-        .arg(ks.join("public/ca.cert.pem"))
-        .arg("-inkey")
-        .arg(ks.join("private/ca.key.pem"))
-        .status()
-        .unwrap();
-    assert!(st.success());
+    sign_permissions(&expired_grant, &ks);
     let k = ks.to_str().unwrap();
     let env = [
         ("ROS_SECURITY_ENABLE", "true"),

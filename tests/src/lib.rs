@@ -75,6 +75,23 @@ pub fn synth_image(seq: &SynthParams, t: usize) -> (bevt_msgs::sensor_msgs::Imag
     )
 }
 
+/// `m` (rgb8) as a PNG `sensor_msgs/CompressedImage` with the same header.
+pub fn png_image(m: &bevt_msgs::sensor_msgs::Image) -> bevt_msgs::sensor_msgs::CompressedImage {
+    let mut data = Vec::new();
+    image::RgbImage::from_raw(m.width, m.height, m.data.clone())
+        .expect("an rgb8 image")
+        .write_to(
+            &mut std::io::Cursor::new(&mut data),
+            image::ImageFormat::Png,
+        )
+        .expect("PNG encoding");
+    bevt_msgs::sensor_msgs::CompressedImage {
+        header: m.header.clone(),
+        format: "png".into(),
+        data,
+    }
+}
+
 /// Statuses the ground station receives within `timeout`, until one satisfies `want`.
 pub fn wait_status(
     gs: &bevt_node::node::sim::GroundStation,
