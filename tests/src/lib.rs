@@ -168,5 +168,8 @@ pub fn skip(test: &str, reason: impl std::fmt::Display) {
     if in_ci() {
         panic!("{test}: would skip under CI=true, where .ci/run installs what it needs: {reason}");
     }
-    println!("SKIPPED {test}: {reason}");
+    // Straight to the process's stderr: the test harness captures `print!` / `eprint!` of a
+    // passing test, and a skip must show in the normal output of `cargo test`.
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr(), "SKIPPED {test}: {reason}");
 }
