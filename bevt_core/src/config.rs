@@ -16,7 +16,7 @@ use crate::track_state::StateParams;
 use serde::{Deserialize, Serialize};
 
 pub mod keys;
-pub use keys::{live_keys, KeySpec, Kind, Range, TRACKER_KEYS};
+pub use keys::{cnn_spec, live_keys, KeySpec, Kind, Range, CNN_KEYS, TRACKER_KEYS};
 
 /// Which features the tracker uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

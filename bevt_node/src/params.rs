@@ -69,21 +69,7 @@ pub fn load_config(path: Option<&Path>, overrides: &[String]) -> Result<TrackerS
             .split_once('=')
             .ok_or_else(|| parse_err(o, &"expected key.path=value"))?;
         let v: serde_norway::Value = crate::yaml::parse(raw, o).map_err(|e| parse_err(o, &e))?;
-        let mut node = &mut value;
-        let parts: Vec<&str> = key.split('.').collect();
-        for (i, part) in parts.iter().enumerate() {
-            let map = node
-                .as_mapping_mut()
-                .ok_or_else(|| parse_err(o, &format!("{key}: not a section")))?;
-            let k = serde_norway::Value::String((*part).to_string());
-            if i + 1 == parts.len() {
-                map.insert(k, v.clone());
-                break;
-            }
-            node = map
-                .entry(k)
-                .or_insert_with(|| serde_norway::Value::Mapping(Default::default()));
-        }
+        crate::yaml::set_dotted(&mut value, key, v).map_err(|e| parse_err(o, &e))?;
         // A wrong type is reported against the override that introduced it (the parser's
         // message does not name the key).
         serde_norway::from_value::<TrackerConfig>(value.clone()).map_err(|e| parse_err(o, &e))?;

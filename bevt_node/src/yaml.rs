@@ -101,11 +101,68 @@ pub fn parse<T: DeserializeOwned>(text: &str, origin: &str) -> Result<T, String>
     serde_norway::from_str(text).map_err(|e| format!("{origin}: {e}"))
 }
 
+/// Sets the dotted `key` (`admm.iterations`) of a YAML tree to `v`, creating the sections on
+/// the way. The one implementation behind `bevt --set`, the node's `-p tracker.*` and its
+/// parameter services.
+///
+/// # Errors
+/// A part of the path is a value, not a section (the error names the key).
+pub fn set_dotted(
+    tree: &mut serde_norway::Value,
+    key: &str,
+    v: serde_norway::Value,
+) -> Result<(), String> {
+    let mut node = tree;
+    let mut parts = key.split('.').peekable();
+    while let Some(part) = parts.next() {
+        let map = node
+            .as_mapping_mut()
+            .ok_or_else(|| format!("{key}: not a section"))?;
+        let k = serde_norway::Value::String(part.to_string());
+        if parts.peek().is_none() {
+            map.insert(k, v);
+            return Ok(());
+        }
+        node = map
+            .entry(k)
+            .or_insert_with(|| serde_norway::Value::Mapping(Default::default()));
+    }
+    Ok(())
+}
+
+/// The value of the dotted `key` in a YAML tree.
+pub fn get_dotted(mut tree: serde_norway::Value, key: &str) -> Option<serde_norway::Value> {
+    for part in key.split('.') {
+        tree = tree.as_mapping_mut()?.remove(part)?;
+    }
+    Some(tree)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use serde_norway::Value;
     use std::time::{Duration, Instant};
+
+    #[test]
+    fn dotted_keys_are_set_and_read_through_sections() {
+        let mut tree: Value = parse("admm:\n  iterations: 2\nthreads: 1\n", "t").unwrap();
+        set_dotted(&mut tree, "admm.iterations", Value::from(5)).unwrap();
+        set_dotted(&mut tree, "scale_filter.step", Value::from(1.5)).unwrap();
+        assert_eq!(
+            get_dotted(tree.clone(), "admm.iterations"),
+            Some(Value::from(5))
+        );
+        assert_eq!(
+            get_dotted(tree.clone(), "scale_filter.step"),
+            Some(Value::from(1.5))
+        );
+        assert_eq!(get_dotted(tree.clone(), "threads"), Some(Value::from(1)));
+        assert_eq!(get_dotted(tree.clone(), "admm.missing"), None);
+        assert_eq!(get_dotted(tree.clone(), "threads.x"), None);
+        let e = set_dotted(&mut tree, "threads.x", Value::from(1)).unwrap_err();
+        assert_eq!(e, "threads.x: not a section");
+    }
 
     #[test]
     fn real_files_pass_and_their_depth_is_small() {

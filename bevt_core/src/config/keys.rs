@@ -14,6 +14,9 @@
 use crate::error::ConfigError;
 use std::fmt::Write as _;
 
+mod cnn_table;
+pub use cnn_table::{cnn_spec, CNN_KEYS};
+
 /// What a key holds.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Kind {
@@ -29,6 +32,8 @@ pub enum Kind {
     Choice(&'static [&'static str]),
     /// A file path (text).
     Path,
+    /// A name (text): a model's input or output.
+    Text,
     /// An optional section of its own (`features.cnn`).
     Section,
 }
@@ -43,6 +48,7 @@ impl Kind {
             Self::FloatList => "float list",
             Self::Choice(_) => "enum",
             Self::Path => "path",
+            Self::Text => "string",
             Self::Section => "section",
         }
     }
@@ -135,6 +141,12 @@ impl Range {
                     )
                 }
             }
+            Self::List {
+                min_len,
+                max_len,
+                lo,
+                hi,
+            } if min_len == max_len => format!("{min_len} values in [{}, {}]", num(lo), num(hi)),
             Self::List {
                 min_len,
                 max_len,

@@ -287,7 +287,7 @@ impl Projection {
         }
         if matrix.len() != rows * cols || matrix.iter().any(|v| !v.is_finite()) {
             return Err(CnnError::Run(
-                "features.cnn.layers.project: the channel projection is not finite".to_string(),
+                "features.cnn.layers[].project: the channel projection is not finite".to_string(),
             ));
         }
         Ok(Self {

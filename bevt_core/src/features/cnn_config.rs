@@ -10,6 +10,7 @@
 //! directory); the `bevt` tool and the node resolve relative paths in a config *file* against
 //! that file's folder first, so the presets in `config/` name `../models/...`.
 
+use crate::config::cnn_spec;
 use crate::error::ConfigError;
 use serde::{Deserialize, Serialize};
 
@@ -214,135 +215,74 @@ impl Default for CnnConfig {
     }
 }
 
-fn check(
-    ok: bool,
-    field: &'static str,
-    value: impl ToString,
-    expected: &'static str,
-) -> Result<(), ConfigError> {
+fn refuse(name: &str, value: impl ToString) -> ConfigError {
+    let k = cnn_spec(name);
+    ConfigError::OutOfRange {
+        field: k.name,
+        value: value.to_string(),
+        expected: k.constraints(),
+    }
+}
+
+fn int_key(name: &str, v: usize) -> Result<(), ConfigError> {
+    cnn_spec(name).check_int(v)
+}
+
+fn float_key(name: &str, v: f32) -> Result<(), ConfigError> {
+    cnn_spec(name).check_float(v)
+}
+
+/// A constraint the table states only in words ([`crate::config::KeySpec::cross`]).
+fn cross_key(ok: bool, name: &str, value: impl ToString) -> Result<(), ConfigError> {
     if ok {
         Ok(())
     } else {
-        Err(ConfigError::OutOfRange {
-            field,
-            value: value.to_string(),
-            expected: expected.to_string(),
-        })
+        Err(refuse(name, value))
     }
 }
 
 impl CnnConfig {
-    /// Range checks of every field (the model itself is checked when it is loaded).
+    /// Checks every field against [`crate::config::CNN_KEYS`] (ranges), then the
+    /// constraints the table states in words (the model itself is checked when it is
+    /// loaded).
     ///
     /// # Errors
     /// [`ConfigError`] naming the offending `features.cnn.*` key.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        check(
-            !self.model.is_empty(),
-            "features.cnn.model",
-            "(empty)",
-            "a path to an ONNX file",
-        )?;
-        check(
-            !self.input.is_empty(),
-            "features.cnn.input",
-            "(empty)",
-            "the model's input name",
-        )?;
-        check(
-            (16..=MAX_INPUT_SIZE).contains(&self.input_size),
-            "features.cnn.input_size",
-            self.input_size,
-            "16..=512 pixels",
-        )?;
-        check(
-            self.value_scale.is_finite() && self.value_scale > 0.0,
-            "features.cnn.value_scale",
-            self.value_scale,
-            "> 0",
-        )?;
-        check(
-            self.mean.iter().all(|v| v.is_finite()),
-            "features.cnn.mean",
-            format!("{:?}", self.mean),
-            "finite values",
-        )?;
-        check(
-            self.std.iter().all(|v| v.is_finite() && *v > 0.0),
+        cross_key(!self.model.is_empty(), "features.cnn.model", "(empty)")?;
+        cross_key(!self.input.is_empty(), "features.cnn.input", "(empty)")?;
+        int_key("features.cnn.input_size", self.input_size)?;
+        float_key("features.cnn.value_scale", self.value_scale)?;
+        cnn_spec("features.cnn.mean").check_list(&self.mean)?;
+        cnn_spec("features.cnn.std").check_list(&self.std)?;
+        cross_key(
+            self.std.iter().all(|v| *v > 0.0),
             "features.cnn.std",
             format!("{:?}", self.std),
-            "finite values > 0",
         )?;
-        check(
-            (1..=32).contains(&self.cell_size),
-            "features.cnn.cell_size",
-            self.cell_size,
-            "1..=32 pixels",
-        )?;
-        check(
-            (1..=MAX_LAYERS).contains(&self.layers.len()),
-            "features.cnn.layers",
-            self.layers.len(),
-            "1..=8 layers",
-        )?;
+        int_key("features.cnn.cell_size", self.cell_size)?;
+        int_key("features.cnn.layers", self.layers.len())?;
         for l in &self.layers {
-            check(
+            cross_key(
                 !l.output.is_empty(),
-                "features.cnn.layers.output",
+                "features.cnn.layers[].output",
                 "(empty)",
-                "an output name",
             )?;
-            check(
-                (1..=MAX_LAYER_CHANNELS).contains(&l.channels),
-                "features.cnn.layers.channels",
-                l.channels,
-                "1..=4096",
-            )?;
-            check(
-                l.weight.is_finite() && l.weight > 0.0,
-                "features.cnn.layers.weight",
-                l.weight,
-                "> 0",
-            )?;
-            check(
-                l.gain.is_finite() && l.gain > 0.0 && l.gain <= 1e6,
-                "features.cnn.layers.gain",
-                l.gain,
-                "(0, 1e6]",
-            )?;
-            check(
-                l.project <= l.channels,
-                "features.cnn.layers.project",
+            int_key("features.cnn.layers[].channels", l.channels)?;
+            float_key("features.cnn.layers[].weight", l.weight)?;
+            float_key("features.cnn.layers[].gain", l.gain)?;
+            int_key("features.cnn.layers[].project", l.project)?;
+            cross_key(
+                l.project <= l.channels && (l.project == 0 || l.channels <= MAX_PROJECTED_CHANNELS),
+                "features.cnn.layers[].project",
                 l.project,
-                "0 (no projection) or 1..=the layer's channels",
-            )?;
-            check(
-                l.project == 0 || l.channels <= MAX_PROJECTED_CHANNELS,
-                "features.cnn.layers.project",
-                l.project,
-                "0 for layers of more than 1024 channels (the PCA is C x C)",
             )?;
         }
         if let Some(h) = &self.hog {
-            check(
-                h.weight.is_finite() && h.weight > 0.0,
-                "features.cnn.hog.weight",
-                h.weight,
-                "> 0",
-            )?;
-            check(
-                h.gain.is_finite() && h.gain > 0.0 && h.gain <= 1e6,
-                "features.cnn.hog.gain",
-                h.gain,
-                "(0, 1e6]",
-            )?;
+            float_key("features.cnn.hog.weight", h.weight)?;
+            float_key("features.cnn.hog.gain", h.gain)?;
         }
-        check(
-            (1..=MAX_INTRA_THREADS).contains(&self.intra_threads),
-            "features.cnn.intra_threads",
-            self.intra_threads,
-            "1..=64",
-        )?;
+        int_key("features.cnn.intra_threads", self.intra_threads)?;
         Ok(())
     }
 }
@@ -373,7 +313,7 @@ mod tests {
         c.layers[0].channels = 0;
         match c.validate() {
             Err(ConfigError::OutOfRange { field, .. }) => {
-                assert_eq!(field, "features.cnn.layers.channels")
+                assert_eq!(field, "features.cnn.layers[].channels")
             }
             other => panic!("{other:?}"),
         }
@@ -390,7 +330,7 @@ mod tests {
         c.layers[0].project = 49;
         match c.validate() {
             Err(ConfigError::OutOfRange { field, .. }) => {
-                assert_eq!(field, "features.cnn.layers.project")
+                assert_eq!(field, "features.cnn.layers[].project")
             }
             other => panic!("{other:?}"),
         }
@@ -410,6 +350,93 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
+    }
+
+    /// Every key the table names is a field of the section (and every field is in the
+    /// table), and the ranges that bound allocations agree with the constants the
+    /// extractor allocates by.
+    #[test]
+    fn the_table_matches_the_section() {
+        use crate::config::{Range, CNN_KEYS};
+        let mut c = nanotrack();
+        c.hog = Some(CnnHogConfig::default());
+        let v = serde_norway::to_value(&c).unwrap();
+        let mut fields = vec![];
+        let serde_norway::Value::Mapping(m) = &v else {
+            panic!("{v:?}")
+        };
+        for (k, val) in m {
+            let k = k.as_str().unwrap();
+            fields.push(format!("features.cnn.{k}"));
+            let sub = match (k, val) {
+                ("layers", serde_norway::Value::Sequence(s)) => Some(("layers[]", &s[0])),
+                ("hog", x) => Some(("hog", x)),
+                _ => None,
+            };
+            if let Some((prefix, serde_norway::Value::Mapping(sm))) = sub {
+                for sk in sm.keys() {
+                    fields.push(format!("features.cnn.{prefix}.{}", sk.as_str().unwrap()));
+                }
+            }
+        }
+        let mut table: Vec<String> = CNN_KEYS.iter().map(|k| k.name.to_string()).collect();
+        fields.sort();
+        table.sort();
+        assert_eq!(fields, table);
+        let bound = |name: &str| cnn_spec(name).range;
+        assert_eq!(
+            bound("features.cnn.input_size"),
+            Range::Int(16, MAX_INPUT_SIZE as u64)
+        );
+        assert_eq!(
+            bound("features.cnn.layers"),
+            Range::Int(1, MAX_LAYERS as u64)
+        );
+        assert_eq!(
+            bound("features.cnn.layers[].channels"),
+            Range::Int(1, MAX_LAYER_CHANNELS as u64)
+        );
+        assert_eq!(
+            bound("features.cnn.intra_threads"),
+            Range::Int(1, MAX_INTRA_THREADS as u64)
+        );
+    }
+
+    /// A value out of the table's range is refused naming the key and the range in the
+    /// table's words.
+    #[test]
+    fn refusals_quote_the_table() {
+        let mut c = nanotrack();
+        c.mean = [0.0, f32::NAN, 0.0];
+        let e = c.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("features.cnn.mean") && e.contains("3 values in"),
+            "{e}"
+        );
+        let mut c = nanotrack();
+        c.layers[0].gain = 2e6;
+        let e = c.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("features.cnn.layers[].gain") && e.contains("(0, 1e6]"),
+            "{e}"
+        );
+        let mut c = nanotrack();
+        c.layers = vec![c.layers[0].clone(); MAX_LAYERS + 1];
+        let e = c.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("features.cnn.layers") && e.contains("1..=8 layers"),
+            "{e}"
+        );
+        let mut c = nanotrack();
+        c.intra_threads = 0;
+        assert!(c.validate().is_err());
+        let mut c = nanotrack();
+        c.input = String::new();
+        let e = c.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("features.cnn.input") && e.contains("non-empty"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -7,13 +7,14 @@
 
 use crate::node::node_params::{launch_from_args, NodeRange, NODE_KEYS};
 use crate::node::param_services::{tracker_value, NodeParams, ParamValue};
-use bevt_core::config::{Kind, TRACKER_KEYS};
+use bevt_core::config::{KeySpec, CNN_KEYS, TRACKER_KEYS};
+use bevt_core::features::cnn_config::{CnnConfig, CnnHogConfig, CnnLayerConfig};
 use bevt_core::TrackerConfig;
 use serde_norway::Value;
 use std::fmt::Write as _;
 
 /// The line before the generated part of `docs/configuration.md`.
-pub const BEGIN: &str = "<!-- BEGIN GENERATED from TRACKER_KEYS and NODE_KEYS: edit the tables in the code, then BEVT_BLESS=1 cargo test -p bevt_node --lib configuration_md -->";
+pub const BEGIN: &str = "<!-- BEGIN GENERATED from TRACKER_KEYS, CNN_KEYS and NODE_KEYS: edit the tables in the code, then BEVT_BLESS=1 cargo test -p bevt_node --lib configuration_md -->";
 /// The line after it.
 pub const END: &str = "<!-- END GENERATED -->";
 
@@ -89,6 +90,71 @@ fn live(l: bool) -> &'static str {
     }
 }
 
+/// One table row of a tracker or `features.cnn` key.
+fn row(out: &mut String, k: &KeySpec, default: &str) {
+    let constraints = k.constraints_in("");
+    let _ = writeln!(
+        out,
+        "| `{}` | {} | {} | {} | {} | {} | {} |",
+        k.name,
+        k.kind.name(),
+        cell(default),
+        cell(if constraints.is_empty() {
+            "–"
+        } else {
+            &constraints
+        }),
+        cell(if k.unit.is_empty() { "–" } else { k.unit }),
+        live(k.live),
+        cell(k.doc)
+    );
+}
+
+/// The smallest layer entry the YAML accepts: its keys are the required ones.
+const MINIMAL_LAYER: &str = "output: o\nchannels: 1\n";
+
+/// The default of a `features.cnn` key, from `CnnConfig::default()` (a layer's, from the
+/// smallest entry the YAML accepts; the HOG section's, from `CnnHogConfig::default()`).
+fn cnn_default(name: &str) -> String {
+    let Some(key) = name.strip_prefix("features.cnn.") else {
+        return String::new();
+    };
+    let c = CnnConfig::default();
+    let lookup = |v: Value, k: &str| -> String {
+        match v.get(k) {
+            Some(x) => yaml(x),
+            None => String::new(),
+        }
+    };
+    if let Some(field) = key.strip_prefix("layers[].") {
+        let minimal: Value = serde_norway::from_str(MINIMAL_LAYER).unwrap_or(Value::Null);
+        if minimal.get(field).is_some() {
+            return "required".into();
+        }
+        return serde_norway::from_str::<CnnLayerConfig>(MINIMAL_LAYER)
+            .ok()
+            .and_then(|l| serde_norway::to_value(l).ok())
+            .map(|v| lookup(v, field))
+            .unwrap_or_default();
+    }
+    if let Some(field) = key.strip_prefix("hog.") {
+        return serde_norway::to_value(CnnHogConfig::default())
+            .map(|v| lookup(v, field))
+            .unwrap_or_default();
+    }
+    if key == "layers" {
+        return c
+            .layers
+            .iter()
+            .map(|l| format!("`{}` ({} channels)", l.output, l.channels))
+            .collect::<Vec<_>>()
+            .join(", ");
+    }
+    serde_norway::to_value(&c)
+        .map(|v| lookup(v, key))
+        .unwrap_or_default()
+}
+
 /// The generated part of `docs/configuration.md` (between [`BEGIN`] and [`END`]).
 pub fn configuration_tables() -> String {
     let mut out = String::new();
@@ -108,25 +174,19 @@ pub fn configuration_tables() -> String {
         let default = tracker_value(&d, k.name)
             .map(|v| yaml(&v))
             .unwrap_or_default();
-        let ty = match (k.kind, k.name) {
-            (Kind::Section, _) => "section",
-            (k, _) => k.name(),
-        };
-        let constraints = k.constraints_in("");
-        let _ = writeln!(
-            out,
-            "| `{}` | {ty} | {} | {} | {} | {} | {} |",
-            k.name,
-            cell(&default),
-            cell(if constraints.is_empty() {
-                "–"
-            } else {
-                &constraints
-            }),
-            cell(if k.unit.is_empty() { "–" } else { k.unit }),
-            live(k.live),
-            cell(k.doc)
-        );
+        row(&mut out, k, &default);
+    }
+    out.push_str(
+        "\n## `features.cnn`\n\n\
+         Written in configuration files only (the node takes the section from its tracker file; \
+         these keys are not node parameters). Defaults are `CnnConfig::default()`, the NanoTrack \
+         v2 backbone's, except `model`, which must be given. The extractor needs the cargo \
+         feature `cnn`; without it `kind: cnn` is an error at construction / `init`. \
+         `layers[].x` is key `x` of every entry of `layers`.\n\n",
+    );
+    out.push_str(HEADER);
+    for k in CNN_KEYS {
+        row(&mut out, k, &cnn_default(k.name));
     }
     out.push_str(
         "\n## Node parameters\n\n\

@@ -28,7 +28,7 @@ use ros2_client::rcl_interfaces::{
     SetParametersRequest, SetParametersResponse,
 };
 use ros2_client::{Name, Publisher, Server, ServiceMapping, ServiceTypeName};
-use serde_norway::{Mapping, Number, Value};
+use serde_norway::{Number, Value};
 use std::collections::BTreeMap;
 use std::time::Duration;
 
@@ -478,31 +478,13 @@ impl NodeParams {
 /// `cfg` with the dotted `key` set to `v` (not validated).
 fn config_with(cfg: &TrackerConfig, key: &str, v: Value) -> Result<TrackerConfig, String> {
     let mut tree = serde_norway::to_value(cfg).map_err(|e| e.to_string())?;
-    let mut node = &mut tree;
-    let parts: Vec<&str> = key.split('.').collect();
-    for (i, part) in parts.iter().enumerate() {
-        let map = node
-            .as_mapping_mut()
-            .ok_or_else(|| format!("tracker.{key}: not a key"))?;
-        let k = Value::String((*part).to_string());
-        if i + 1 == parts.len() {
-            map.insert(k, v);
-            break;
-        }
-        node = map
-            .entry(k)
-            .or_insert_with(|| Value::Mapping(Mapping::new()));
-    }
+    crate::yaml::set_dotted(&mut tree, key, v).map_err(|e| format!("tracker.{e}"))?;
     serde_norway::from_value(tree).map_err(|e| format!("tracker.{key}: {e}"))
 }
 
 /// The value of the dotted tracker `key` (`admm.iterations`) in `cfg`.
 pub fn tracker_value(cfg: &TrackerConfig, key: &str) -> Option<Value> {
-    let mut v = serde_norway::to_value(cfg).ok()?;
-    for part in key.split('.') {
-        v = v.as_mapping_mut()?.remove(part)?;
-    }
-    Some(v)
+    crate::yaml::get_dotted(serde_norway::to_value(cfg).ok()?, key)
 }
 
 /// Leaves of a YAML tree by dotted name.
