@@ -9,9 +9,8 @@ use crate::confidence::{ConfidenceMeasure, ConfidenceParams};
 use crate::consensus::{ConsensusNorm, GateParams, VerificationScore, VerifyParams};
 use crate::error::ConfigError;
 use crate::features::cnn_config::CnnConfig;
-use crate::filter::admm::{AdmmParams, PenaltyKind};
+use crate::filter::admm::PenaltyKind;
 use crate::redetect::RedetectParams;
-use crate::scale_filter::ScaleFilterParams;
 use crate::track_state::StateParams;
 use serde::{Deserialize, Serialize};
 
@@ -521,8 +520,6 @@ impl TrackerConfig {
 pub struct TrackerSpec {
     /// The validated configuration.
     pub config: TrackerConfig,
-    /// ADMM parameters.
-    pub admm: AdmmParams,
     /// Verification parameters.
     pub verify: VerifyParams,
     /// Learning gate of `verification.score: confidence`.
@@ -533,8 +530,6 @@ pub struct TrackerSpec {
     pub states: StateParams,
     /// Re-detection parameters.
     pub redetect: RedetectParams,
-    /// Scale-filter parameters.
-    pub scale_filter: ScaleFilterParams,
 }
 
 fn check(
@@ -728,28 +723,6 @@ impl TrackerConfig {
         int_key("threads", self.threads)?;
         Ok(TrackerSpec {
             config: self.clone(),
-            admm: AdmmParams {
-                iterations: a.iterations,
-                mu_init: a.mu_init,
-                beta: a.beta,
-                mu_max: a.mu_max,
-                lambda: a.lambda,
-                penalty: a.penalty,
-                spatial_weight: a.spatial_weight,
-                temporal: a.temporal,
-            },
-            scale_filter: ScaleFilterParams {
-                scales: sf.scales,
-                interpolated_scales: sf.interpolated_scales,
-                step: sf.step,
-                learning_rate: sf.learning_rate,
-                sigma_factor: sf.sigma_factor,
-                lambda: sf.lambda,
-                sample_side: sf.sample_side,
-                cell: sf.cell_size,
-                padding: sf.padding,
-                colornames: sf.colornames,
-            },
             verify: VerifyParams {
                 norm: v.norm,
                 threshold_low: v.threshold_low,

@@ -24,6 +24,7 @@
 //! by area averaging like the translation patches. Everything is allocated at construction;
 //! [`ScaleFilter::estimate`] and [`ScaleFilter::train`] allocate nothing.
 
+use crate::config::ScaleFilterConfig;
 use crate::error::TrackError;
 use crate::features::{FeatureExtractor, FeatureMap, Hog};
 use crate::filter::label::hann;
@@ -32,32 +33,6 @@ use crate::image::{Frame, Patch, Sampler, MAX_SAMPLE_ASPECT};
 use rustfft::num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
 use std::sync::Arc;
-
-/// Settings of the scale filter (validated by [`crate::TrackerConfig::validate`]).
-#[derive(Debug, Clone, PartialEq)]
-pub struct ScaleFilterParams {
-    /// Scales sampled per frame, `n` (fDSST 17).
-    pub scales: usize,
-    /// Scales after interpolation, `m ≥ n` (fDSST 33).
-    pub interpolated_scales: usize,
-    /// Ratio between neighbouring interpolated scales (fDSST 1.02).
-    pub step: f32,
-    /// Learning rate η of the scale model (fDSST 0.025).
-    pub learning_rate: f32,
-    /// Label σ as a fraction of `m` (fDSST 1/16).
-    pub sigma_factor: f32,
-    /// Ridge λ of the detection denominator (fDSST 0.01).
-    pub lambda: f32,
-    /// Side of each scale sample, pixels.
-    pub sample_side: usize,
-    /// HOG cell of the scale samples, pixels (fDSST 4).
-    pub cell: usize,
-    /// Sample extent as a multiple of the target box (fDSST 1).
-    pub padding: f32,
-    /// Append the 10 colour-name channels per cell to the samples' fHOG (colour frames
-    /// only; fDSST: HOG only).
-    pub colornames: bool,
-}
 
 /// Smallest norm of a basis vector before it is treated as linearly dependent.
 const BASIS_EPS: f32 = 1e-12;
@@ -145,9 +120,9 @@ impl ScaleFilter {
     ///
     /// # Errors
     /// [`TrackError::Feature`] when `sample_side` gives fewer than 2×2 HOG cells.
-    pub fn new(p: &ScaleFilterParams, planes: usize) -> Result<Self, TrackError> {
+    pub fn new(p: &ScaleFilterConfig, planes: usize) -> Result<Self, TrackError> {
         let (n, m) = (p.scales.max(1), p.interpolated_scales.max(p.scales).max(1));
-        let cell = p.cell.max(1);
+        let cell = p.cell_size.max(1);
         let cells = p.sample_side / cell;
         if cells < 2 {
             return Err(TrackError::Feature(format!(
@@ -413,8 +388,8 @@ mod tests {
     use crate::eval::synth::SynthParams;
     use crate::image::PixelFormat;
 
-    fn params() -> ScaleFilterParams {
-        ScaleFilterParams {
+    fn params() -> ScaleFilterConfig {
+        ScaleFilterConfig {
             scales: 17,
             interpolated_scales: 33,
             step: 1.02,
@@ -422,7 +397,7 @@ mod tests {
             sigma_factor: 1.0 / 16.0,
             lambda: 0.01,
             sample_side: 24,
-            cell: 4,
+            cell_size: 4,
             padding: 1.0,
             colornames: false,
         }
@@ -466,7 +441,7 @@ mod tests {
 
     /// Final scale estimate and truth after a ×2 change over 30 frames (frame 0 → 29), the
     /// position given, the scale left to the filter.
-    fn track_doubling(p: &ScaleFilterParams) -> (f32, f32) {
+    fn track_doubling(p: &ScaleFilterConfig) -> (f32, f32) {
         let frames = 30;
         let seq = SynthParams {
             width: 480,
@@ -505,7 +480,7 @@ mod tests {
 
     #[test]
     fn recovers_a_doubling_with_colour_names_in_the_samples() {
-        let p = ScaleFilterParams {
+        let p = ScaleFilterConfig {
             colornames: true,
             ..params()
         };
@@ -516,11 +491,11 @@ mod tests {
 
     #[test]
     fn colour_names_add_ten_channels_per_cell_on_colour_frames_only() {
-        let p = ScaleFilterParams {
+        let p = ScaleFilterConfig {
             colornames: true,
             ..params()
         };
-        let cells = (p.sample_side / p.cell).pow(2);
+        let cells = (p.sample_side / p.cell_size).pow(2);
         assert_eq!(ScaleFilter::new(&params(), 3).unwrap().d, cells * 31);
         assert_eq!(ScaleFilter::new(&p, 3).unwrap().d, cells * 41);
         // mono8: no colour, the group is left out.
@@ -529,7 +504,7 @@ mod tests {
 
     #[test]
     fn too_small_sample_is_an_error() {
-        let p = ScaleFilterParams {
+        let p = ScaleFilterConfig {
             sample_side: 4,
             ..params()
         };

@@ -634,7 +634,7 @@ impl BevtTracker {
                 weight: l.weight,
             });
             solvers.push(AdmmSolver::new(
-                grid, bins, l.channels, &spec.admm, &reg, crop,
+                grid, bins, l.channels, &cfg.admm, &reg, crop,
             ));
             start += l.channels;
         }
@@ -647,8 +647,8 @@ impl BevtTracker {
             ),
             ScaleEstimator::Filter => (
                 vec![1.0],
-                Some(ScaleFilter::new(&spec.scale_filter, planes)?),
-                spec.scale_filter.step,
+                Some(ScaleFilter::new(&cfg.scale_filter, planes)?),
+                cfg.scale_filter.step,
             ),
         };
         let workers = factors

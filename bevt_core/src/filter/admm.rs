@@ -13,6 +13,7 @@
 //!
 //! All spectra are half spectra in the layout of [`crate::fft`]; `T = H·W`.
 
+use crate::config::AdmmConfig;
 use crate::fft::Fft2;
 use crate::geometry::GridSize;
 use nalgebra::DMatrix;
@@ -27,7 +28,7 @@ pub enum PenaltyKind {
     /// taken as a matrix (the paper's stated simplification).
     Matrix,
     /// A diagonal spatial penalty (eq. 8 with `p` diagonal) at magnitude κ
-    /// ([`AdmmParams::spatial_weight`]): `h = IFFT2(μĝ + l̂) / (κp² + μ)`. The literal
+    /// ([`AdmmConfig::spatial_weight`]): `h = IFFT2(μĝ + l̂) / (κp² + μ)`. The literal
     /// eq. 8 is κ = 2/T, which cannot act against μ ≥ 1 (2p²/T ≤ 1.25e-3 on the support).
     Elementwise,
     /// Plain BACF: `h = T/(μT + λ) · IFFT2(μĝ + l̂)`.
@@ -64,28 +65,9 @@ impl CropBox {
     }
 }
 
-/// Solver parameters.
-#[derive(Debug, Clone, PartialEq)]
-pub struct AdmmParams {
-    /// Number of ADMM iterations.
-    pub iterations: usize,
-    /// Initial penalty μ.
-    pub mu_init: f32,
-    /// μ growth factor β.
-    pub beta: f32,
-    /// Upper bound of μ.
-    pub mu_max: f32,
-    /// Ridge weight λ of the `none` penalty.
-    pub lambda: f32,
-    /// Penalty form.
-    pub penalty: PenaltyKind,
-    /// Magnitude κ of the `elementwise` penalty (unitless; see [`PenaltyKind::Elementwise`]).
-    pub spatial_weight: f32,
-    /// Weight θ of the temporal term `θ/2‖ĝ − ĝ_prev‖²` (0 = none; units of μ).
-    pub temporal: f32,
-}
-
-impl AdmmParams {
+/// The solver takes its parameters straight from the `admm` section (the penalty window
+/// keys shape the window the caller builds, not the solver).
+impl AdmmConfig {
     /// The μ used in each iteration: `μ₀ = mu_init`, `μ_{i+1} = min(β·μ_i, μ_max)`.
     pub fn mu_schedule(&self) -> Vec<f32> {
         let mut mu = self.mu_init;
@@ -144,7 +126,7 @@ impl AdmmSolver {
         grid: GridSize,
         bins: usize,
         channels: usize,
-        params: &AdmmParams,
+        params: &AdmmConfig,
         reg: &[f32],
         crop: CropBox,
     ) -> Self {
@@ -538,7 +520,7 @@ mod tests {
             }
         }
         let grid = GridSize { h: 6, w: 6 };
-        let params = AdmmParams {
+        let params = AdmmConfig {
             iterations: 1,
             mu_init: mu,
             beta: 10.0,
@@ -547,6 +529,7 @@ mod tests {
             penalty: PenaltyKind::None,
             spatial_weight: 0.0,
             temporal: 0.0,
+            ..AdmmConfig::default()
         };
         let reg = vec![1.0; 36];
         let mut solver =
@@ -678,7 +661,7 @@ mod tests {
         let mut yf = vec![Complex32::default(); bins];
         fft.forward(&y, &mut yf);
         let reg = reg_window(grid, Size2 { w: 32.0, h: 32.0 }, 4, 0.1, 0.8);
-        let params = AdmmParams {
+        let params = AdmmConfig {
             iterations: 6,
             mu_init: 1.0,
             beta: 10.0,
@@ -687,6 +670,7 @@ mod tests {
             penalty: PenaltyKind::Elementwise,
             spatial_weight: 2.0 / 576.0,
             temporal: 0.0,
+            ..AdmmConfig::default()
         };
         let crop = CropBox::centred(grid, GridSize { h: 8, w: 8 });
         let mut solver = AdmmSolver::new(grid, bins, d, &params, &reg, crop);
@@ -737,7 +721,7 @@ mod tests {
         fft.forward(&y, &mut yf);
         let (min, edge) = (0.1, 0.8);
         let reg = reg_window(grid, Size2 { w: 48.0, h: 48.0 }, 4, min, edge);
-        let params = AdmmParams {
+        let params = AdmmConfig {
             iterations: 3,
             mu_init: 1.0,
             beta: 20.0,
@@ -746,6 +730,7 @@ mod tests {
             penalty,
             spatial_weight: kappa,
             temporal: 0.0,
+            ..AdmmConfig::default()
         };
         let crop = CropBox::centred(grid, GridSize { h: 12, w: 12 });
         let mut solver = AdmmSolver::new(grid, bins, d, &params, &reg, crop);
@@ -806,7 +791,7 @@ mod tests {
         let reg = reg_window(grid, Size2 { w: 24.0, h: 24.0 }, 4, 0.1, 0.8);
         let crop = CropBox::centred(grid, GridSize { h: 6, w: 6 });
         let train = |theta: f32, fft: &mut Fft2| {
-            let params = AdmmParams {
+            let params = AdmmConfig {
                 iterations: 3,
                 mu_init: 1.0,
                 beta: 20.0,
@@ -815,6 +800,7 @@ mod tests {
                 penalty: PenaltyKind::Elementwise,
                 spatial_weight: 10.0,
                 temporal: theta,
+                ..AdmmConfig::default()
             };
             let mut solver = AdmmSolver::new(grid, bins, d, &params, &reg, crop);
             let mut g = vec![Complex32::default(); d * bins];
@@ -848,7 +834,7 @@ mod tests {
 
     #[test]
     fn mu_schedule_grows_by_beta_and_saturates() {
-        let p = AdmmParams {
+        let p = AdmmConfig {
             iterations: 5,
             mu_init: 1.0,
             beta: 20.0,
@@ -857,6 +843,7 @@ mod tests {
             penalty: PenaltyKind::Matrix,
             spatial_weight: 0.0,
             temporal: 0.0,
+            ..AdmmConfig::default()
         };
         assert_eq!(p.mu_schedule(), vec![1.0, 20.0, 400.0, 8000.0, 10000.0]);
     }
