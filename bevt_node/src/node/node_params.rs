@@ -908,6 +908,43 @@ mod tests {
         assert!(e.to_string().contains("ROS_DOMAIN_ID"));
     }
 
+    /// `config/node.yaml` names every parameter of the table (set, or commented out when its
+    /// default is "unset"), and each line's comment states the range the table enforces, so
+    /// the file's hand-written comments cannot drift from the checks.
+    #[test]
+    fn the_shipped_parameters_file_states_the_table_ranges() {
+        let text = include_str!("../../../config/node.yaml");
+        let num = |v: f64| format!("{v}");
+        for k in NODE_KEYS.iter().filter(|k| k.name != "use_sim_time") {
+            let line = text
+                .lines()
+                .find(|l| {
+                    let l = l.trim_start().trim_start_matches("# ");
+                    l.strip_prefix(k.name).is_some_and(|r| r.starts_with(':'))
+                })
+                .unwrap_or_else(|| panic!("{} is not in config/node.yaml", k.name));
+            let comment = line
+                .split_once(" # ")
+                .map(|(_, c)| c)
+                .unwrap_or_else(|| panic!("{}: no comment", k.name));
+            let want: Vec<String> = match k.range {
+                NodeRange::Int(lo, hi) | NodeRange::Chars(lo, hi) => vec![format!("{lo}..={hi}")],
+                NodeRange::Real(lo, hi) | NodeRange::OffOr(lo, hi) => {
+                    vec![format!("{}..={}", num(lo), num(hi))]
+                }
+                NodeRange::Choice(c) => c.iter().map(|c| c.to_string()).collect(),
+                NodeRange::Any | NodeRange::Fixed(_) => vec![],
+            };
+            for w in want {
+                assert!(
+                    comment.contains(&w),
+                    "config/node.yaml, {}: the comment does not state `{w}` (NODE_KEYS): {line}",
+                    k.name
+                );
+            }
+        }
+    }
+
     #[test]
     fn the_shipped_parameters_file_loads() {
         let text = include_str!("../../../config/node.yaml");
