@@ -47,7 +47,7 @@ pub(super) fn check(
         st.drift = DriftCheck::default();
         return Ok(decided);
     };
-    if st.drift.since % every == 0 {
+    if st.drift.since == 0 || st.drift.since >= every {
         st.drift.since = 0;
         let size = st.target_size();
         let side = 2.0 * context_side(size.w, size.h);
