@@ -1031,26 +1031,40 @@ mod tests {
 
     /// Issue 20: a box left on background while the confidence gives no warning (here the
     /// confidence rule is off: `lost_threshold` 0) is flagged by the drift check alone, and
-    /// only once the target has gone.
+    /// only once the target has gone: occluded in a small frame, and a small target gone
+    /// from a large frame under camera motion (as when it leaves the view).
     #[test]
     fn the_drift_check_flags_a_box_left_on_background() {
         const HIDE: usize = 25;
-        let seq = SynthParams {
+        let occluded = SynthParams {
             frames: 45,
             hidden: Some((HIDE, 45)),
             ..SynthParams::default()
         };
+        let gone = SynthParams {
+            width: 960,
+            height: 540,
+            target: (28.0, 24.0),
+            camera_velocity: (1.5, -0.8),
+            ..occluded.clone()
+        };
+        for seq in [occluded, gone] {
+            drift_flags_only_the_hidden_frames(&seq, HIDE);
+        }
+    }
+
+    fn drift_flags_only_the_hidden_frames(seq: &SynthParams, hide: usize) {
         let mut cfg = TrackerConfig::default();
         cfg.track_state.lost_threshold = 0.0;
         cfg.track_state.drift_check_frames = 0;
-        let off = states(&seq, &cfg);
+        let off = states(seq, &cfg);
         assert!(off.iter().all(|(s, _)| *s == TrackState::Tracking));
         cfg.track_state.drift_check_frames = 1;
-        let on = states(&seq, &cfg);
+        let on = states(seq, &cfg);
         // `on[i]` is frame i + 1: visible frames agree, hidden ones (after two frames of
         // latency at most) are uncertain for drift.
         assert!(
-            on[..HIDE - 1]
+            on[..hide - 1]
                 .iter()
                 .all(|(s, _)| *s == TrackState::Tracking),
             "{on:?}"
@@ -1058,7 +1072,7 @@ mod tests {
         let drift = |(s, r): &(TrackState, StateReason)| {
             *s == TrackState::Uncertain && matches!(r, StateReason::OffTarget { .. })
         };
-        assert!(on[HIDE + 1..].iter().all(drift), "{on:?}");
+        assert!(on[hide + 1..].iter().all(drift), "{on:?}");
     }
 
     #[test]
