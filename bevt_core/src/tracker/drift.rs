@@ -27,7 +27,7 @@ pub(super) struct DriftCheck {
     off: Option<f32>,
 }
 
-/// A tracked frame the state machine has just decided (`state`, `reason`): on confident
+/// A tracked frame the state machine has just `decided` (state and reason): on confident
 /// frames, runs the check when it is due and overrules the state while the last check
 /// disagrees. Any other state ends the hold, and the next confident frame is checked at
 /// once.
