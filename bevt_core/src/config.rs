@@ -346,6 +346,12 @@ pub struct TrackStateConfig {
     pub lost_threshold: f32,
     /// Unconfident frames in a row that make the target lost.
     pub lost_frames: usize,
+    /// Drift check: every this many confident frames the learned verifier
+    /// (`redetection.verifier`) scores the box against the first frame's template; 0 = off
+    /// (also off without a verifier). One pass costs about one tracked frame.
+    pub drift_check_frames: usize,
+    /// Verifier score (logit margin) below which a drift check makes the state uncertain.
+    pub drift_threshold: f32,
 }
 
 impl Default for TrackStateConfig {
@@ -353,6 +359,8 @@ impl Default for TrackStateConfig {
         Self {
             lost_threshold: 0.3,
             lost_frames: 12,
+            drift_check_frames: 15,
+            drift_threshold: 4.0,
         }
     }
 }
@@ -704,6 +712,8 @@ impl TrackerConfig {
         let t = &self.track_state;
         float_key("track_state.lost_threshold", t.lost_threshold)?;
         int_key("track_state.lost_frames", t.lost_frames)?;
+        int_key("track_state.drift_check_frames", t.drift_check_frames)?;
+        float_key("track_state.drift_threshold", t.drift_threshold)?;
         let r = &self.redetection;
         int_key("redetection.windows_per_frame", r.windows_per_frame)?;
         keys::spec("redetection.scales").check_list(&r.scales)?;
@@ -979,7 +989,7 @@ mod tests {
                 k.name
             );
         }
-        assert_eq!(live_keys().count(), 18);
+        assert_eq!(live_keys().count(), 20);
     }
 
     #[test]

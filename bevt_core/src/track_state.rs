@@ -70,6 +70,15 @@ pub enum StateReason {
         /// Consecutive frames below it, the search included.
         frames: usize,
     },
+    /// Drift: the confidence is fine, but the learned verifier, cross-checking the box
+    /// against the first frame's template, scores it below `threshold` (the box is off the
+    /// target or on something else). Held until its next check agrees.
+    OffTarget {
+        /// The verifier's score at the box (NanoTrack foreground logit margin).
+        score: f32,
+        /// The threshold (`track_state.drift_threshold`).
+        threshold: f32,
+    },
     /// Found again after `after` lost frames.
     Reacquired {
         /// Frames spent lost.
@@ -96,6 +105,10 @@ impl fmt::Display for StateReason {
             } => write!(
                 f,
                 "target lost: confidence {confidence:.2} below {threshold:.2} for {frames} frames"
+            ),
+            Self::OffTarget { score, threshold } => write!(
+                f,
+                "drift: the box does not match the first frame's target (verifier score {score:.1} below {threshold:.1})"
             ),
             Self::Reacquired { after } => write!(f, "re-acquired after {after} frames"),
         }
@@ -174,6 +187,18 @@ impl StateMachine {
         }
     }
 
+    /// A frame [`Self::track`] found confident, overruled by a drift check: the verifier
+    /// scored the box `score`, below `threshold`. The reported state is `uncertain`; the
+    /// machine itself stays where the confidence put it ([`Self::state`] is unchanged, the
+    /// counter of unconfident frames is not advanced), so the drift check changes what is
+    /// reported, not when the track is lost or which model the lost state freezes.
+    pub fn off_target(&self, score: f32, threshold: f32) -> (TrackState, StateReason) {
+        (
+            TrackState::Uncertain,
+            StateReason::OffTarget { score, threshold },
+        )
+    }
+
     /// One lost frame searched without success; `confidence` is the best candidate's.
     pub fn searching(&mut self, confidence: f32) -> (TrackState, StateReason) {
         self.below = self.below.saturating_add(1);
@@ -230,5 +255,25 @@ mod tests {
         assert_eq!(r.to_string(), "re-acquired after 31 frames");
         assert_eq!(m.track(0.9).0, TrackState::Tracking);
         assert_eq!(StateReason::Confident.to_string(), "");
+    }
+
+    #[test]
+    fn a_drift_check_makes_a_confident_frame_uncertain_without_counting_towards_lost() {
+        let mut m = StateMachine::new(StateParams {
+            lost_threshold: 0.25,
+            lost_frames: 2,
+        });
+        assert_eq!(m.track(0.1).0, TrackState::Uncertain);
+        assert_eq!(m.track(0.9).0, TrackState::Tracking);
+        let (s, r) = m.off_target(2.34, 4.0);
+        assert_eq!(s, TrackState::Uncertain);
+        assert_eq!(m.state(), TrackState::Tracking);
+        assert_eq!(
+            r.to_string(),
+            "drift: the box does not match the first frame's target (verifier score 2.3 below 4.0)"
+        );
+        // One unconfident frame after it is the first of `lost_frames`, not the second.
+        assert_eq!(m.track(0.1).0, TrackState::Uncertain);
+        assert_eq!(m.track(0.1).0, TrackState::Lost);
     }
 }

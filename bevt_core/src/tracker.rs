@@ -3,6 +3,7 @@
 //! [`Tracker`] is the interface every driver uses (the ROS node, the `bevt` tool, tests);
 //! [`BevtTracker`] implements ALGORITHM.md §§1–7 on top of the stage modules.
 
+mod drift;
 mod lost;
 
 use crate::confidence::{psr, ConfidenceModel, Measures};
@@ -293,6 +294,7 @@ struct State {
     gate: LearningGate,
     states: StateMachine,
     lost: lost::LostState,
+    drift: drift::DriftCheck,
 }
 
 impl State {
@@ -721,6 +723,7 @@ impl BevtTracker {
             gate: LearningGate::new(spec.gate),
             states: StateMachine::new(spec.states),
             lost: lost::LostState::default(),
+            drift: drift::DriftCheck::default(),
         }))
     }
 
@@ -920,8 +923,11 @@ impl Tracker for BevtTracker {
         let relative = st.confidence.relative(score);
         let warming_up = st.confidence.warming_up();
         let before = st.states.state();
-        let (state, reason) = st.states.track(confidence);
-        if lost::after_decision(st, frame, &self.spec, before, state) {
+        let decided = st.states.track(confidence);
+        let (state, reason) =
+            drift::check(st, frame, &self.spec, self.verifier.as_deref_mut(), decided)?;
+        // The lost state follows the confidence's decision: a drift check only reports.
+        if lost::after_decision(st, frame, &self.spec, before, decided.0) {
             return Ok(Self::output_at(
                 st,
                 st.pos,
@@ -1007,6 +1013,66 @@ mod tests {
             state = t.update(&frame).unwrap().state;
         }
         state
+    }
+
+    /// States and reasons of frames 1.. of `seq` tracked with `cfg`.
+    fn states(seq: &SynthParams, cfg: &TrackerConfig) -> Vec<(TrackState, StateReason)> {
+        let mut t = started(seq, cfg);
+        (1..seq.frames)
+            .map(|i| {
+                let f = seq.frame(i);
+                let frame =
+                    Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+                let o = t.update(&frame).unwrap();
+                (o.state, o.reason)
+            })
+            .collect()
+    }
+
+    /// Issue 20: a box left on background while the confidence gives no warning (here the
+    /// confidence rule is off: `lost_threshold` 0) is flagged by the drift check alone, and
+    /// only once the target has gone: occluded in a small frame, and a small target gone
+    /// from a large frame under camera motion (as when it leaves the view).
+    #[test]
+    fn the_drift_check_flags_a_box_left_on_background() {
+        const HIDE: usize = 25;
+        let occluded = SynthParams {
+            frames: 45,
+            hidden: Some((HIDE, 45)),
+            ..SynthParams::default()
+        };
+        let gone = SynthParams {
+            width: 960,
+            height: 540,
+            target: (28.0, 24.0),
+            camera_velocity: (1.5, -0.8),
+            ..occluded.clone()
+        };
+        for seq in [occluded, gone] {
+            drift_flags_only_the_hidden_frames(&seq, HIDE);
+        }
+    }
+
+    fn drift_flags_only_the_hidden_frames(seq: &SynthParams, hide: usize) {
+        let mut cfg = TrackerConfig::default();
+        cfg.track_state.lost_threshold = 0.0;
+        cfg.track_state.drift_check_frames = 0;
+        let off = states(seq, &cfg);
+        assert!(off.iter().all(|(s, _)| *s == TrackState::Tracking));
+        cfg.track_state.drift_check_frames = 1;
+        let on = states(seq, &cfg);
+        // `on[i]` is frame i + 1: visible frames agree, hidden ones (after two frames of
+        // latency at most) are uncertain for drift.
+        assert!(
+            on[..hide - 1]
+                .iter()
+                .all(|(s, _)| *s == TrackState::Tracking),
+            "{on:?}"
+        );
+        let drift = |(s, r): &(TrackState, StateReason)| {
+            *s == TrackState::Uncertain && matches!(r, StateReason::OffTarget { .. })
+        };
+        assert!(on[hide + 1..].iter().all(drift), "{on:?}");
     }
 
     #[test]

@@ -259,12 +259,15 @@ fn after_a_look_alike_the_target_is_reacquired_and_kept() {
 /// drift detection (issue 20) lands: NanoTrack's verifier scores the look-alike like the
 /// target, it is re-acquired at frame 45 and reported `tracking` on frames 46–49 before
 /// the filter, frozen from the real target, finds it unconfident and the track is lost
-/// again (`lost.rs`: without the verifier it is not taken). Run it with `--ignored`.
+/// again (`lost.rs`: without the verifier it is not taken). The drift check
+/// (`tracker/drift.rs`) does not catch it either: it asks the same verifier. Run it with
+/// `--ignored`.
 #[test]
 #[ignore = "known defect: the NanoTrack verifier takes the look-alike (issue 20)"]
 fn the_look_alike_is_never_reported_as_the_target() {
-    let (r, frames) = look_alike_run();
-    let claimed: Vec<usize> = (1..=frames)
+    let (r, _) = look_alike_run();
+    // `r[t - 1]` is frame t: frames 1..=r.len() (frame 0 is the initialisation).
+    let claimed: Vec<usize> = (1..=r.len())
         .filter(|&t| {
             matches!(
                 r[t - 1].0.state,

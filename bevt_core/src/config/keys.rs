@@ -494,6 +494,10 @@ pub static TRACKER_KEYS: &[KeySpec] = &[
         "Confidence below this is unconfident (0–1; 0 = never)."),
     key("track_state.lost_frames", Int, int(1, 10_000), "frames", LIVE,
         "Unconfident frames in a row that make the target lost."),
+    key("track_state.drift_check_frames", Int, int(0, 10_000), "frames", LIVE,
+        "Drift check: every this many confident frames the learned verifier scores the box against the first frame's template (0 = off; off without `redetection.verifier`). 15: one pass (about 27 ms on the 2-core dev VM) every 15 frames costs about 9 % of a 21 ms frame, near the 10 % budget; checks every 4 frames cost 24 %."),
+    key("track_state.drift_threshold", Float, closed(-100.0, 100.0), "logit margin", LIVE,
+        "Verifier score below which a drift check makes a confident frame uncertain (reason: drift). 4.0: below the re-acquisition bar (`redetection.verifier_threshold` 5.0), so a box the verifier would nearly accept is not a drift; on the dev set, boxes on the target score 5.3 or more (5th percentile per sequence), boxes off it in car14 and wakeboard4 4.1 or less (95th), and leave-one-sequence-out picks 4.0 for 6 of 7 folds."),
     // redetection
     key("redetection.enabled", Bool, Range::Any, "", FIXED,
         "Search the frame for a lost target; off: only the window at the last known position is searched (with the same confirmation), at the scale of the loss."),

@@ -196,7 +196,7 @@ pub fn summarize_run(r: &SequenceRun) -> SequenceSummary {
         } else {
             cons.iter().sum::<f64>() / cons.len() as f64
         },
-        lost: (!r.truth.is_empty()).then(|| score_lost(&labels)),
+        lost: (!r.truth.is_empty()).then(|| score_lost(&[&labels])),
         reacquire_frames: reacquire_frames(&states, &r.truth),
         labels,
         consensus_quantiles: consensus_quantiles(cons),
@@ -251,7 +251,7 @@ pub fn build_summary(
     let scored: Vec<&SequenceScores> = done.iter().filter_map(|r| r.scores.as_ref()).collect();
     let mut overall = overall_of(&scored);
     overall.failed = runs.len() - done.len();
-    let pooled: Vec<FrameLabel> = done.iter().flat_map(|r| r.labels.clone()).collect();
+    let pooled: Vec<&[FrameLabel]> = done.iter().map(|r| r.labels.as_slice()).collect();
     overall.lost = Some(score_lost(&pooled));
     let re: Vec<Option<usize>> = done
         .iter()
@@ -405,6 +405,17 @@ fn fmt_opt(v: f64, width: usize) -> String {
     }
 }
 
+/// The console cell of the time to flag: median frames / episodes never flagged.
+fn time_to_flag(l: &LostScores) -> String {
+    let m = l.time_to_flag_median;
+    let m = if m.is_finite() {
+        format!("{m:.1}")
+    } else {
+        "-".to_string()
+    };
+    format!("{m}/{}", l.episodes_never_flagged)
+}
+
 /// Writes `summary.json`.
 ///
 /// # Errors
@@ -419,7 +430,7 @@ pub fn console_table(s: &Summary) -> String {
     let mut t = String::new();
     let _ = writeln!(
         t,
-        "{:<14} {:>6} {:>7} {:>6} {:>7} {:>8} {:>8} {:>7} {:>7} {:>7} {:>9}  status",
+        "{:<14} {:>6} {:>7} {:>6} {:>7} {:>8} {:>8} {:>7} {:>7} {:>7} {:>7} {:>7} {:>9} {:>9}  status",
         "sequence",
         "frames",
         "P@20",
@@ -428,19 +439,31 @@ pub fn console_table(s: &Summary) -> String {
         "learned",
         "skipped",
         "confAUC",
+        "flagP",
+        "flagR",
         "lostP",
         "lostR",
+        "ttf/never",
         "reacq"
     );
     let lost_cells = |l: Option<&LostScores>| {
-        l.map_or(format!("{:>7} {:>7} {:>7}", "-", "-", "-"), |l| {
+        l.map_or(
             format!(
-                "{} {} {}",
-                fmt_opt(l.confidence_auc, 7),
-                fmt_opt(l.lost_precision, 7),
-                fmt_opt(l.lost_recall, 7)
-            )
-        })
+                "{:>7} {:>7} {:>7} {:>7} {:>7} {:>9}",
+                "-", "-", "-", "-", "-", "-"
+            ),
+            |l| {
+                format!(
+                    "{} {} {} {} {} {:>9}",
+                    fmt_opt(l.confidence_auc, 7),
+                    fmt_opt(l.flag_precision, 7),
+                    fmt_opt(l.flag_recall, 7),
+                    fmt_opt(l.lost_precision, 7),
+                    fmt_opt(l.lost_recall, 7),
+                    time_to_flag(l)
+                )
+            },
+        )
     };
     for r in &s.sequences {
         let reacq: Vec<String> = r
@@ -485,10 +508,16 @@ pub fn console_table(s: &Summary) -> String {
     if let Some(l) = &o.lost {
         let _ = writeln!(
             t,
-            "confidence ROC-AUC {} (good {} / bad {} frames, pooled); lost state precision {} recall {} ({} lost frames); re-acquired {}/{} reappearances, mean {} frames",
+            "confidence ROC-AUC {} (good {} / bad {} frames, pooled); flags (uncertain|lost) precision {} recall {} ({} flagged frames); time to flag median {} frames over {} failure episodes, {} never flagged; lost state precision {} recall {} ({} lost frames); re-acquired {}/{} reappearances, mean {} frames",
             fmt_opt(l.confidence_auc, 0),
             l.good_frames,
             l.bad_frames,
+            fmt_opt(l.flag_precision, 0),
+            fmt_opt(l.flag_recall, 0),
+            l.flagged_frames,
+            fmt_opt(l.time_to_flag_median, 0),
+            l.episodes,
+            l.episodes_never_flagged,
             fmt_opt(l.lost_precision, 0),
             fmt_opt(l.lost_recall, 0),
             l.lost_frames,
