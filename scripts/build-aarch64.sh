@@ -4,7 +4,7 @@
 #
 # Usage: scripts/build-aarch64.sh [PROFILE] [-- CARGO_ARGS...]
 #   PROFILE     `flight` (default: fat LTO, the binaries that fly), `release`, or `dev`
-#               (quick; what CI builds for the emulated checks, scripts/check-aarch64.sh).
+#               (quick to build; optimised like every profile here).
 #   CARGO_ARGS  passed to `cargo build` (e.g. `-- --no-default-features --features jazzy`).
 # The binaries land in <target dir>/aarch64-unknown-linux-gnu/<profile dir>/ (cargo names
 # the dev profile's folder `debug`); their folder is printed last.
