@@ -174,9 +174,8 @@ pub fn fuse(
         x: filter_pos.x + cfg.center_weight * h.dx,
         y: filter_pos.y + cfg.center_weight * h.dy,
     };
-    if !(size.w > 0.0 && size.h > 0.0 && size.w.is_finite() && size.h.is_finite())
-        || !(pos.x.is_finite() && pos.y.is_finite())
-    {
+    let finite = size.w.is_finite() && size.h.is_finite() && pos.x.is_finite() && pos.y.is_finite();
+    if !(finite && size.w > 0.0 && size.h > 0.0) {
         return keep;
     }
     Refined {

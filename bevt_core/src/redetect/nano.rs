@@ -609,6 +609,9 @@ impl NanoVerifier {
     }
 }
 
+/// The head's per-point foreground logit margins `[256]` and box distances `[4·256]`.
+pub type HeadMaps = (Vec<f32>, Vec<f32>);
+
 impl NanoVerifier {
     /// The head's maps on the square search crop of side `side` at `center` against the
     /// template of [`Verifier::set_template`]: per grid point of the 16×16 map the
@@ -624,7 +627,7 @@ impl NanoVerifier {
         frame: &Frame<'_>,
         center: Point2,
         side: f32,
-    ) -> Result<Option<(Vec<f32>, Vec<f32>)>, TrackError> {
+    ) -> Result<Option<HeadMaps>, TrackError> {
         if self.template.is_empty() || !(side.is_finite() && side > 0.0) {
             return Ok(None);
         }
