@@ -447,6 +447,62 @@ impl Default for RedetectionConfig {
     }
 }
 
+/// The learned box on the filter (see [`crate::box_refine`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BoxRefineConfig {
+    /// `none`: the box is the filter's (first frame's aspect, scale filter); `nanotrack`:
+    /// NanoTrack v2's head regresses the box on a search crop at the filter's position each
+    /// tracked frame (pure Rust); `nanotrack_ort`: the same on ONNX Runtime (cargo feature
+    /// `cnn`). The networks are `redetection.verifier_backbone` / `verifier_head`.
+    pub mode: BoxRefineMode,
+    /// Head foreground probability at or above which its box is taken (else the scale
+    /// filter's size is kept).
+    pub min_score: f32,
+    /// Largest distance between the head's and the filter's box centres, in target sizes
+    /// (√(w·h)), for the head's box to be taken.
+    pub max_offset: f32,
+    /// Targets whose shorter side is below this (pixels) keep the filter's box.
+    pub min_side: f32,
+    /// Weight of the head's centre against the filter's when the head's box is taken (0:
+    /// the filter's centre, 1: the head's).
+    pub center_weight: f32,
+    /// NanoTrack's scale/aspect-change penalty `k`: score × exp(−k·(r·s − 1)).
+    pub penalty_k: f32,
+    /// NanoTrack's cosine-window weight on the penalised score map.
+    pub window_influence: f32,
+    /// NanoTrack's size learning rate (times the chosen point's penalised score).
+    pub size_rate: f32,
+}
+
+/// The box refinement stage (`box_refine.mode`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BoxRefineMode {
+    /// The filter's box.
+    #[default]
+    None,
+    /// NanoTrack v2's head on tract.
+    Nanotrack,
+    /// NanoTrack v2's head on ONNX Runtime (cargo feature `cnn`).
+    NanotrackOrt,
+}
+
+impl Default for BoxRefineConfig {
+    fn default() -> Self {
+        Self {
+            mode: BoxRefineMode::None,
+            min_score: 0.5,
+            max_offset: 0.5,
+            min_side: 20.0,
+            center_weight: 0.5,
+            penalty_k: 0.148,
+            window_influence: 0.462,
+            size_rate: 0.39,
+        }
+    }
+}
+
 /// Everything the tracker can be told. See `config/bevt.yaml` for the annotated defaults.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -471,6 +527,8 @@ pub struct TrackerConfig {
     pub track_state: TrackStateConfig,
     /// Re-detection while lost.
     pub redetection: RedetectionConfig,
+    /// The learned box on the filter.
+    pub box_refine: BoxRefineConfig,
     /// Worker threads for the per-scale work of one frame (1 = sequential). Work runs on
     /// the caller's rayon pool; the core spawns no threads itself.
     pub threads: usize,
@@ -489,6 +547,7 @@ impl Default for TrackerConfig {
             confidence: ConfidenceConfig::default(),
             track_state: TrackStateConfig::default(),
             redetection: RedetectionConfig::default(),
+            box_refine: BoxRefineConfig::default(),
             threads: 1,
         }
     }
@@ -730,6 +789,14 @@ impl TrackerConfig {
         int_key("redetection.verifier_windows", r.verifier_windows)?;
         keys::spec("redetection.verifier_scales").check_list(&r.verifier_scales)?;
         float_key("redetection.verifier_threshold", r.verifier_threshold)?;
+        let b = &self.box_refine;
+        float_key("box_refine.min_score", b.min_score)?;
+        float_key("box_refine.max_offset", b.max_offset)?;
+        float_key("box_refine.min_side", b.min_side)?;
+        float_key("box_refine.center_weight", b.center_weight)?;
+        float_key("box_refine.penalty_k", b.penalty_k)?;
+        float_key("box_refine.window_influence", b.window_influence)?;
+        float_key("box_refine.size_rate", b.size_rate)?;
         int_key("threads", self.threads)?;
         Ok(TrackerSpec {
             config: self.clone(),

@@ -37,6 +37,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod box_refine;
 pub mod confidence;
 pub mod config;
 pub mod consensus;

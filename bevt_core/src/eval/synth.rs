@@ -19,6 +19,9 @@ pub struct SynthParams {
     pub target: (f32, f32),
     /// Target scale change per frame (multiplicative, e.g. 1.003).
     pub scale_rate: f32,
+    /// Change of the target's aspect ratio `w/h` per frame (multiplicative; 1 = none): the
+    /// width grows by its square root and the height shrinks by it, area kept.
+    pub aspect_rate: f32,
     /// Amplitude of the target's elliptical path, pixels (x, y).
     pub path_amplitude: (f32, f32),
     /// Camera motion per frame (background shift), pixels (x, y).
@@ -51,6 +54,7 @@ impl Default for SynthParams {
             frames: 60,
             target: (40.0, 32.0),
             scale_rate: 1.004,
+            aspect_rate: 1.0,
             path_amplitude: (60.0, 40.0),
             camera_velocity: (1.5, -0.8),
             seed: 7,
@@ -108,7 +112,8 @@ impl SynthParams {
     pub fn truth(&self, t: usize) -> BBox {
         let tf = t as f32;
         let s = self.scale_rate.powf(tf);
-        let (w, h) = (self.target.0 * s, self.target.1 * s);
+        let a = self.aspect_rate.powf(tf).sqrt();
+        let (w, h) = (self.target.0 * s * a, self.target.1 * s / a);
         let phase = tf * 0.06;
         let (ox, oy) = match self.hidden {
             Some((_, end)) if t >= end => self.reappear_offset,
@@ -154,6 +159,12 @@ impl SynthParams {
             self.camera_velocity.1 * t as f32,
         );
         let s = truth.w / self.target.0;
+        // Texture scale per axis (one scale without aspect change, as it always was).
+        let (sx, sy) = if self.aspect_rate == 1.0 {
+            (s, s)
+        } else {
+            (s, truth.h / self.target.1)
+        };
         let mut rgb = vec![0u8; self.width * self.height * 3];
         for y in 0..self.height {
             for x in 0..self.width {
@@ -163,7 +174,7 @@ impl SynthParams {
                 let px = &mut rgb[(y * self.width + x) * 3..][..3];
                 if let Some((truth, seed)) = inside {
                     // Target texture in its own (scaled) coordinates: moves and scales with it.
-                    let (u, v) = ((xf - truth.x) / s, (yf - truth.y) / s);
+                    let (u, v) = ((xf - truth.x) / sx, (yf - truth.y) / sy);
                     // A dark rim (like a vehicle's outline) plus internal texture.
                     let rim = u.min(v).min(self.target.0 - u).min(self.target.1 - v)
                         < RIM_FRACTION * self.target.0.min(self.target.1);

@@ -609,6 +609,39 @@ impl NanoVerifier {
     }
 }
 
+/// The head's per-point foreground logit margins `[256]` and box distances `[4·256]`.
+pub type HeadMaps = (Vec<f32>, Vec<f32>);
+
+impl NanoVerifier {
+    /// The head's maps on the square search crop of side `side` at `center` against the
+    /// template of [`Verifier::set_template`]: per grid point of the 16×16 map the
+    /// foreground logit margin and the four box distances `(margins[256], loc[4·256])`
+    /// (left, top, right, bottom in 255-pixel crop units from grid point
+    /// `(j − 8)·16 + 127`); `None` without a template or for a degenerate side. What
+    /// [`crate::box_refine`] post-processes NanoTrack's way.
+    ///
+    /// # Errors
+    /// A network error.
+    pub fn score_maps(
+        &mut self,
+        frame: &Frame<'_>,
+        center: Point2,
+        side: f32,
+    ) -> Result<Option<HeadMaps>, TrackError> {
+        if self.template.is_empty() || !(side.is_finite() && side > 0.0) {
+            return Ok(None);
+        }
+        self.crop(frame, center, side, SEARCH_SIDE);
+        self.search = self.run_backbone(SEARCH_SIDE)?;
+        Ok(Some(self.run_head()?))
+    }
+
+    /// True once a template is set.
+    pub fn has_template(&self) -> bool {
+        !self.template.is_empty()
+    }
+}
+
 impl Verifier for NanoVerifier {
     fn set_template(
         &mut self,
