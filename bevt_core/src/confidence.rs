@@ -27,6 +27,7 @@
 //!
 //! The peak-to-sidelobe ratio (PSR) is that of MOSSE (Bolme et al. 2010).
 
+use crate::config::ConfidenceConfig;
 use crate::filter::peak::argmax;
 use crate::geometry::GridSize;
 use serde::{Deserialize, Serialize};
@@ -46,22 +47,6 @@ pub enum ConfidenceMeasure {
     Psr,
     /// `r·q`, their product (the default).
     PeakPsr,
-}
-
-/// Parameters of the confidence (validated by [`crate::TrackerConfig::validate`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ConfidenceParams {
-    /// The measure.
-    pub measure: ConfidenceMeasure,
-    /// Score `s` at which the confidence is 0.5.
-    pub half_score: f32,
-    /// Frames over which the gate's reference is the plain mean before it becomes a
-    /// running one.
-    pub warmup_frames: usize,
-    /// Running-average rate ρ of the gate's reference level, per frame.
-    pub reference_rate: f32,
-    /// Half-side of the square around the peak excluded from the PSR sidelobe, cells.
-    pub psr_exclusion: usize,
 }
 
 /// Peak-to-sidelobe ratio of a row-major response `map` on `grid` (unshifted or shifted:
@@ -119,7 +104,7 @@ pub struct Measures {
 /// The confidence and the gate's running reference level.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ConfidenceModel {
-    params: ConfidenceParams,
+    params: ConfidenceConfig,
     initial_peak: f32,
     reference: f32,
     seen: usize,
@@ -127,7 +112,7 @@ pub struct ConfidenceModel {
 
 impl ConfidenceModel {
     /// A model for a filter whose in-sample peak on its initial model is `initial_peak`.
-    pub fn new(params: ConfidenceParams, initial_peak: f32) -> Self {
+    pub fn new(params: ConfidenceConfig, initial_peak: f32) -> Self {
         Self {
             params,
             initial_peak: if initial_peak.is_finite() {
@@ -142,7 +127,7 @@ impl ConfidenceModel {
 
     /// Replaces the parameters, keeping the running reference level and the initial peak
     /// (for [`crate::BevtTracker::retune`]).
-    pub fn set_params(&mut self, params: ConfidenceParams) {
+    pub fn set_params(&mut self, params: ConfidenceConfig) {
         self.params = params;
     }
 
@@ -215,13 +200,13 @@ impl ConfidenceModel {
 mod tests {
     use super::*;
 
-    fn params(measure: ConfidenceMeasure) -> ConfidenceParams {
-        ConfidenceParams {
+    fn params(measure: ConfidenceMeasure) -> ConfidenceConfig {
+        ConfidenceConfig {
             measure,
             half_score: 5.0,
             warmup_frames: 3,
             reference_rate: 0.1,
-            psr_exclusion: 2,
+            psr_exclusion_cells: 2,
         }
     }
 

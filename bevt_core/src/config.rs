@@ -5,13 +5,11 @@
 //! ALGORITHM.md is a field here; where the paper and the reference MATLAB differ the choice
 //! is an enum, and its default is documented on the field.
 
-use crate::confidence::{ConfidenceMeasure, ConfidenceParams};
+use crate::confidence::ConfidenceMeasure;
 use crate::consensus::{ConsensusNorm, GateParams, VerificationScore, VerifyParams};
 use crate::error::ConfigError;
 use crate::features::cnn_config::CnnConfig;
 use crate::filter::admm::PenaltyKind;
-use crate::redetect::RedetectParams;
-use crate::track_state::StateParams;
 use serde::{Deserialize, Serialize};
 
 pub mod keys;
@@ -308,7 +306,7 @@ impl Default for VerificationConfig {
 }
 
 /// Per-frame confidence (see [`crate::confidence`]).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ConfidenceConfig {
     /// `peak_psr` (r·q), `peak` (r: peak over the initial filter's in-sample peak) or `psr`
@@ -339,7 +337,7 @@ impl Default for ConfidenceConfig {
 }
 
 /// Track state machine (see [`crate::track_state`]).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrackStateConfig {
     /// Confidence below this is unconfident (0–1).
@@ -571,7 +569,7 @@ impl TrackerConfig {
         v.max_consecutive_skips = o.max_consecutive_skips;
         c.confidence.half_score = other.confidence.half_score;
         c.confidence.reference_rate = other.confidence.reference_rate;
-        c.track_state = other.track_state.clone();
+        c.track_state = other.track_state;
         let (r, o) = (&mut c.redetection, &other.redetection);
         r.windows_per_frame = o.windows_per_frame;
         r.reacquire_threshold = o.reacquire_threshold;
@@ -591,12 +589,6 @@ pub struct TrackerSpec {
     pub verify: VerifyParams,
     /// Learning gate of `verification.score: confidence`.
     pub gate: GateParams,
-    /// Confidence parameters.
-    pub confidence: ConfidenceParams,
-    /// State machine parameters.
-    pub states: StateParams,
-    /// Re-detection parameters.
-    pub redetect: RedetectParams,
 }
 
 fn check(
@@ -813,27 +805,6 @@ impl TrackerConfig {
                 rate: l.rate,
                 reinforced_rate: l.reinforced_rate,
                 max_consecutive_skips: v.max_consecutive_skips,
-            },
-            confidence: ConfidenceParams {
-                measure: c.measure,
-                half_score: c.half_score,
-                warmup_frames: c.warmup_frames,
-                reference_rate: c.reference_rate,
-                psr_exclusion: c.psr_exclusion_cells,
-            },
-            states: StateParams {
-                lost_threshold: t.lost_threshold,
-                lost_frames: t.lost_frames,
-            },
-            redetect: RedetectParams {
-                enabled: r.enabled,
-                windows_per_frame: r.windows_per_frame,
-                scales: r.scales.clone(),
-                tile_stride: r.tile_stride,
-                reacquire_threshold: r.reacquire_threshold,
-                reacquire_relative: r.reacquire_relative,
-                reacquire_frames: r.reacquire_frames,
-                proposals: r.proposals,
             },
         })
     }

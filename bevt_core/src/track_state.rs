@@ -14,6 +14,7 @@
 //! `Uncertain` again. Each state comes with a [`StateReason`] that prints as the operator
 //! reads it ("target lost: confidence 0.08 below 0.25 for 10 frames").
 
+use crate::config::TrackStateConfig;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 
@@ -115,19 +116,10 @@ impl fmt::Display for StateReason {
     }
 }
 
-/// Thresholds of the state machine.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct StateParams {
-    /// Confidence below this is unconfident.
-    pub lost_threshold: f32,
-    /// Unconfident frames in a row that make the target lost.
-    pub lost_frames: usize,
-}
-
 /// The state machine (the re-detection decides when a lost target is found again).
 #[derive(Debug, Clone, PartialEq)]
 pub struct StateMachine {
-    params: StateParams,
+    params: TrackStateConfig,
     state: TrackState,
     below: usize,
     lost_for: usize,
@@ -135,7 +127,7 @@ pub struct StateMachine {
 
 impl StateMachine {
     /// Starts in [`TrackState::Tracking`].
-    pub fn new(params: StateParams) -> Self {
+    pub fn new(params: TrackStateConfig) -> Self {
         Self {
             params,
             state: TrackState::Tracking,
@@ -146,7 +138,7 @@ impl StateMachine {
 
     /// Replaces the thresholds, keeping the state and its counters (for
     /// [`crate::BevtTracker::retune`]).
-    pub fn set_params(&mut self, params: StateParams) {
+    pub fn set_params(&mut self, params: TrackStateConfig) {
         self.params = params;
     }
 
@@ -231,9 +223,10 @@ mod tests {
 
     #[test]
     fn walks_tracking_uncertain_lost_reacquired_tracking() {
-        let mut m = StateMachine::new(StateParams {
+        let mut m = StateMachine::new(TrackStateConfig {
             lost_threshold: 0.25,
             lost_frames: 3,
+            ..TrackStateConfig::default()
         });
         assert_eq!(m.track(0.9).0, TrackState::Tracking);
         assert_eq!(m.track(0.1).0, TrackState::Uncertain);
@@ -259,9 +252,10 @@ mod tests {
 
     #[test]
     fn a_drift_check_makes_a_confident_frame_uncertain_without_counting_towards_lost() {
-        let mut m = StateMachine::new(StateParams {
+        let mut m = StateMachine::new(TrackStateConfig {
             lost_threshold: 0.25,
             lost_frames: 2,
+            ..TrackStateConfig::default()
         });
         assert_eq!(m.track(0.1).0, TrackState::Uncertain);
         assert_eq!(m.track(0.9).0, TrackState::Tracking);

@@ -571,8 +571,8 @@ impl BevtTracker {
         }
         if let Some(st) = self.state.as_mut() {
             st.gate.set_params(spec.gate);
-            st.states.set_params(spec.states);
-            st.confidence.set_params(spec.confidence);
+            st.states.set_params(spec.config.track_state);
+            st.confidence.set_params(spec.config.confidence);
         }
         self.spec = spec;
         Ok(())
@@ -762,9 +762,9 @@ impl BevtTracker {
             frame_h: frame.height(),
             format: frame.format(),
             geo,
-            confidence: ConfidenceModel::new(spec.confidence, 0.0),
+            confidence: ConfidenceModel::new(spec.config.confidence, 0.0),
             gate: LearningGate::new(spec.gate),
-            states: StateMachine::new(spec.states),
+            states: StateMachine::new(spec.config.track_state),
             lost: lost::LostState::default(),
             drift: drift::DriftCheck::default(),
         }))
@@ -883,7 +883,7 @@ impl Tracker for BevtTracker {
         }
         st.ideal_response();
         let initial_peak = st.m_ideal.iter().copied().fold(0.0f32, f32::max);
-        st.confidence = ConfidenceModel::new(self.spec.confidence, initial_peak);
+        st.confidence = ConfidenceModel::new(self.spec.config.confidence, initial_peak);
         lost::start(&mut st, frame);
         self.state = Some(st);
         Ok(())
@@ -975,7 +975,7 @@ impl Tracker for BevtTracker {
             psr: psr(
                 &st.workers[best].resp,
                 st.geo.grid,
-                self.spec.confidence.psr_exclusion,
+                self.spec.config.confidence.psr_exclusion_cells,
             ),
         };
         let score = st.confidence.score(measures);

@@ -30,6 +30,7 @@
 
 pub mod nano;
 
+use crate::config::RedetectionConfig;
 use crate::error::TrackError;
 use crate::geometry::Point2;
 use crate::image::Frame;
@@ -85,29 +86,6 @@ pub trait Verifier: Send + std::fmt::Debug {
 /// Upper bound on the tiles of one plan (per scale); the stride grows to respect it.
 pub const MAX_TILES: usize = 1024;
 
-/// Re-detection parameters (validated by [`crate::TrackerConfig::validate`]).
-#[derive(Debug, Clone, PartialEq)]
-pub struct RedetectParams {
-    /// Search beyond the last position; when off only the window at the last known
-    /// position is searched (at the scale of the loss).
-    pub enabled: bool,
-    /// Search windows evaluated per lost frame.
-    pub windows_per_frame: usize,
-    /// Scales tried, relative to the target scale when it was lost.
-    pub scales: Vec<f32>,
-    /// Distance between tile centres as a fraction of the search-window side.
-    pub tile_stride: f32,
-    /// Confidence at or above which a window is a candidate.
-    pub reacquire_threshold: f32,
-    /// Fraction of the reference level at the loss a candidate's score must also reach
-    /// (see [`candidate_threshold`]).
-    pub reacquire_relative: f32,
-    /// Frames in a row a candidate must be confident to be accepted.
-    pub reacquire_frames: usize,
-    /// Windows per lost frame placed on whole-frame template-match proposals (0 = none).
-    pub proposals: usize,
-}
-
 /// One search window: centre (image pixels) and scale relative to the scale at the loss.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Window {
@@ -132,7 +110,7 @@ impl SearchPlan {
         frame_w: usize,
         frame_h: usize,
         window_side: f32,
-        p: &RedetectParams,
+        p: &RedetectionConfig,
     ) -> Self {
         if !p.enabled {
             return Self {
@@ -198,7 +176,7 @@ impl SearchPlan {
 /// confidence `to_confidence` gives a score of `reacquire_relative × reference` (the
 /// learning gate's reference level frozen on the last confident frame) if that is higher.
 pub fn candidate_threshold(
-    p: &RedetectParams,
+    p: &RedetectionConfig,
     reference: f32,
     to_confidence: impl Fn(f32) -> f32,
 ) -> f32 {
@@ -639,8 +617,8 @@ impl CandidateTracker {
 mod tests {
     use super::*;
 
-    fn params() -> RedetectParams {
-        RedetectParams {
+    fn params() -> RedetectionConfig {
+        RedetectionConfig {
             enabled: true,
             windows_per_frame: 4,
             scales: vec![1.0, 0.8],
@@ -649,6 +627,7 @@ mod tests {
             reacquire_relative: 0.5,
             reacquire_frames: 3,
             proposals: 4,
+            ..RedetectionConfig::default()
         }
     }
 
@@ -916,7 +895,7 @@ mod tests {
         // A weak reference (or none yet): the absolute threshold.
         assert_eq!(candidate_threshold(&p, 4.0, conf), 0.5);
         assert_eq!(candidate_threshold(&p, 0.0, conf), 0.5);
-        let off = RedetectParams {
+        let off = RedetectionConfig {
             reacquire_relative: 0.0,
             ..params()
         };
@@ -953,7 +932,7 @@ mod tests {
         let plan = SearchPlan::new(Point2 { x: 0.0, y: 0.0 }, 8192, 8192, 8.0, &params());
         assert!(plan.len() <= (MAX_TILES + 1) * 2, "{}", plan.len());
         assert!(SearchPlan::default().is_empty());
-        let off = RedetectParams {
+        let off = RedetectionConfig {
             enabled: false,
             ..params()
         };

@@ -14,13 +14,14 @@
 
 use super::{BevtTracker, State};
 use crate::confidence::{psr, Measures};
+use crate::config::RedetectionConfig;
 use crate::config::TrackerSpec;
 use crate::error::TrackError;
 use crate::geometry::Point2;
 use crate::image::Frame;
 use crate::redetect::{
     candidate_threshold, context_side, propose, Appearance, Candidate, CandidateTracker,
-    ProposalScratch, RedetectParams, SearchPlan, Verifier, VerifierHit,
+    ProposalScratch, SearchPlan, Verifier, VerifierHit,
 };
 use crate::track_state::TrackState;
 use crate::tracker::TrackOutput;
@@ -138,20 +139,22 @@ fn enter(st: &mut State, spec: &TrackerSpec) {
     }
     l.scale_at_loss = st.scale;
     let confidence = &st.confidence;
-    l.threshold = candidate_threshold(&spec.redetect, l.reference, |s| confidence.confidence(s));
+    l.threshold = candidate_threshold(&spec.config.redetection, l.reference, |s| {
+        confidence.confidence(s)
+    });
     l.candidates.clear();
     l.plan = SearchPlan::new(
         st.pos,
         st.frame_w,
         st.frame_h,
         st.geo.patch_side as f32 * st.scale,
-        &spec.redetect,
+        &spec.config.redetection,
     );
     let r = &spec.config.redetection;
-    let vparams = RedetectParams {
+    let vparams = RedetectionConfig {
         scales: r.verifier_scales.clone(),
         tile_stride: VERIFIER_TILE_STRIDE,
-        ..spec.redetect.clone()
+        ..spec.config.redetection.clone()
     };
     let vside = 2.0 * verifier_side(st, st.scale);
     st.lost.vcand.clear();
@@ -212,7 +215,10 @@ fn verify(
             st.lost.vcand.offer(h.pos, scale, h.score, thr);
         }
     }
-    Ok(st.lost.vcand.end_frame(spec.redetect.reacquire_frames))
+    Ok(st
+        .lost
+        .vcand
+        .end_frame(spec.config.redetection.reacquire_frames))
 }
 
 /// One search window at `center` and absolute `scale`: the position the frozen filter
@@ -254,7 +260,11 @@ fn evaluate(
     };
     let m = Measures {
         peak: w.peak.score,
-        psr: psr(&w.resp, geo.grid, spec.confidence.psr_exclusion),
+        psr: psr(
+            &w.resp,
+            geo.grid,
+            spec.config.confidence.psr_exclusion_cells,
+        ),
     };
     let pos = if pos.x.is_finite() && pos.y.is_finite() {
         pos
@@ -273,7 +283,7 @@ pub(super) fn search(
     spec: &TrackerSpec,
     verifier: Option<&mut (dyn Verifier + 'static)>,
 ) -> Result<TrackOutput, TrackError> {
-    let p = &spec.redetect;
+    let p = &spec.config.redetection;
     let threshold = st.lost.threshold;
     let near = st.geo.cell as f32 * st.scale * CANDIDATE_NEAR_CELLS;
     st.lost.candidates.begin_frame(near);
