@@ -133,7 +133,7 @@ fn stages(c: &mut Criterion) {
         let r = start..start + l.channels;
         solvers.push((
             r,
-            AdmmSolver::new(grid, bins, l.channels, &spec.admm, &reg, crop),
+            AdmmSolver::new(grid, bins, l.channels, &spec.config.admm, &reg, crop),
         ));
         start += l.channels;
     }
@@ -186,7 +186,7 @@ fn stages(c: &mut Criterion) {
         },
     );
     if tc.detection.scale_estimator == ScaleEstimator::Filter {
-        let mut sf = ScaleFilter::new(&spec.scale_filter, 3).unwrap();
+        let mut sf = ScaleFilter::new(&spec.config.scale_filter, 3).unwrap();
         let size = f0.truth.size();
         sf.train(&frame, center, size).unwrap();
         c.bench_function("cnn scale filter: estimate + train", |b| {

@@ -116,7 +116,7 @@ fn stages(c: &mut Criterion) {
         ),
         ("none", bevt_core::filter::admm::PenaltyKind::None),
     ] {
-        let mut params = spec.admm.clone();
+        let mut params = spec.config.admm.clone();
         params.penalty = penalty;
         let mut solver = AdmmSolver::new(grid, bins, CHANNELS, &params, &reg, crop);
         c.bench_function(
@@ -157,7 +157,7 @@ fn stages(c: &mut Criterion) {
         })
     });
 
-    let sf_params = spec.scale_filter.clone();
+    let sf_params = spec.config.scale_filter.clone();
     let mut sf = ScaleFilter::new(&sf_params, 3).unwrap();
     let size = f0.truth.size();
     sf.train(&frame, center, size).unwrap();
