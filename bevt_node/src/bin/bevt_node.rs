@@ -10,10 +10,12 @@ use bevt_msgs::builtin_interfaces::Time;
 use bevt_node::convert::bbox_from_detection;
 use bevt_node::convert::reinit_request;
 use bevt_node::node::app::NodeCore;
+use bevt_node::node::console;
 use bevt_node::node::node_params::{launch_from_args, wants_help, Launch, USAGE};
 use bevt_node::node::ros;
 use bevt_node::node::sim::{spawn_camera, GroundStation};
 use bevt_node::tool::replay::state_name;
+use ros2_client::log::LogLevel;
 use std::collections::BTreeMap;
 use std::ops::Bound;
 use std::process::ExitCode;
@@ -269,21 +271,28 @@ fn run() -> Result<()> {
     let s = stop.clone();
     ctrlc::set_handler(move || s.store(true, Ordering::Relaxed))
         .context("cannot install the SIGINT/SIGTERM handler")?;
-    eprintln!(
-        "bevt_node: {}",
-        launch.ros.security.startup_line(launch.ros.domain_id)
-    );
+    // Start-up lines in the node's log format (severity, time, node name), under its
+    // `--log-level` like every later line.
+    let info = |text: &str| {
+        console::log(
+            LogLevel::Info,
+            launch.ros.log_level,
+            &launch.ros.node_name,
+            text,
+        )
+    };
+    info(&launch.ros.security.startup_line(launch.ros.domain_id));
     if launch.demo {
         return demo(launch, stop);
     }
-    eprintln!(
-        "bevt_node: domain {}, namespace {}, interfaces {:?}, services {:?}, camera input {}",
+    info(&format!(
+        "domain {}, namespace {}, interfaces {:?}, services {:?}, camera input {}",
         launch.ros.domain_id,
         launch.ros.namespace,
         launch.ros.networks,
         launch.ros.service_mapping,
         launch.ros.image_transport.name()
-    );
+    ));
     let core = NodeCore::new(launch.tracker.clone(), launch.node.clone());
     ros::run(core, &launch.ros, stop, |_| {})?;
     Ok(())

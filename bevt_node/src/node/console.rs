@@ -17,6 +17,35 @@ pub fn severity(level: LogLevel) -> &'static str {
     }
 }
 
+/// Parses a `--log-level` value as `ros2 run … --ros-args --log-level` takes it: a severity
+/// (`debug`, `info`, `warn`, `error`, `fatal`, any case) for the node's logger, or
+/// `LOGGER:=SEVERITY` for a named logger. Returns the logger name (`None` = the default
+/// logger) and the threshold.
+///
+/// # Errors
+/// A message naming the accepted severities.
+pub fn parse_log_level(value: &str) -> Result<(Option<String>, LogLevel), String> {
+    let (logger, level) = match value.split_once(":=") {
+        Some((l, v)) if !l.is_empty() => (Some(l.to_string()), v),
+        Some(_) => return Err(format!("--log-level {value:?}: empty logger name")),
+        None => (None, value),
+    };
+    let level = match level.to_ascii_lowercase().as_str() {
+        "debug" => LogLevel::Debug,
+        "info" => LogLevel::Info,
+        "warn" | "warning" => LogLevel::Warn,
+        "error" => LogLevel::Error,
+        "fatal" => LogLevel::Fatal,
+        _ => {
+            return Err(format!(
+                "--log-level {:?}: expected debug, info, warn, error or fatal (optionally LOGGER:=LEVEL)",
+                printable(value, MAX_NAME_CHARS)
+            ))
+        }
+    };
+    Ok((logger, level))
+}
+
 /// One console line, without the newline; `at` before the epoch prints as 0.
 pub fn line(level: LogLevel, at: SystemTime, node: &str, text: &str) -> String {
     let t = at.duration_since(UNIX_EPOCH).unwrap_or_default();
@@ -26,6 +55,22 @@ pub fn line(level: LogLevel, at: SystemTime, node: &str, text: &str) -> String {
         t.as_secs(),
         t.subsec_nanos()
     )
+}
+
+/// Writes one line to standard error now, when `level` is at or above `threshold` (the
+/// node's `--log-level`).
+pub fn log(level: LogLevel, threshold: LogLevel, node: &str, text: &str) {
+    if level >= threshold {
+        eprintln!(
+            "{}",
+            line(
+                level,
+                SystemTime::now(),
+                node,
+                &printable(text, MAX_LOG_CHARS)
+            )
+        );
+    }
 }
 
 /// The exit status of a node one of whose threads panicked (EX_SOFTWARE).
@@ -98,6 +143,22 @@ pub fn printable(text: &str, max: usize) -> String {
 mod tests {
     use super::*;
     use std::time::Duration;
+
+    #[test]
+    fn log_levels_parse_as_ros_takes_them() {
+        assert_eq!(parse_log_level("WARN").unwrap(), (None, LogLevel::Warn));
+        assert_eq!(parse_log_level("debug").unwrap(), (None, LogLevel::Debug));
+        assert_eq!(
+            parse_log_level("bevt_node:=error").unwrap(),
+            (Some("bevt_node".to_string()), LogLevel::Error)
+        );
+        for bad in ["", "verbose", ":=info", "bevt_node:=", "info\n[FATAL]"] {
+            let e = parse_log_level(bad).unwrap_err();
+            assert!(e.contains("--log-level"), "{bad:?}: {e}");
+            assert!(!e.contains('\n'), "{bad:?}: {e}");
+        }
+        assert!(LogLevel::Debug < LogLevel::Info && LogLevel::Error < LogLevel::Fatal);
+    }
 
     #[test]
     fn logged_text_cannot_forge_lines_or_flood_the_log() {

@@ -404,6 +404,8 @@ ROS arguments (after --ros-args, as rcl takes them):
   -p NAME:=VALUE      one parameter (node parameters and tracker.* keys); repeatable
   -r FROM:=TO         a topic remap, or __ns:=/ns, __node:=name; repeatable
   -e, --enclave PATH  the DDS Security enclave (with ROS_SECURITY_ENABLE=true)
+  --log-level LEVEL   lowest severity logged (console and /rosout): debug, info (default),
+                      warn, error or fatal; also NODE_NAME:=LEVEL
 
 Environment: ROS_DOMAIN_ID, ROS_SECURITY_ENABLE, ROS_SECURITY_STRATEGY,
 ROS_SECURITY_KEYSTORE, ROS_SECURITY_ENCLAVE_OVERRIDE.
@@ -431,6 +433,8 @@ struct CommandLine {
     remaps: Vec<(String, String)>,
     /// `--enclave PATH` (or `-e`).
     enclave: Option<String>,
+    /// `--log-level [LOGGER:=]LEVEL`, in order.
+    log_levels: Vec<(Option<String>, ros2_client::log::LogLevel)>,
 }
 
 /// Splits the arguments into the node's own (`--demo`, `--duration`) and the
@@ -472,7 +476,9 @@ fn parse_command_line(args: &[String]) -> Result<CommandLine, LaunchError> {
                 cl.remaps.push((k.to_string(), val.to_string()));
             }
             "--log-level" if ros => {
-                next("--log-level")?;
+                let v = next("--log-level")?;
+                cl.log_levels
+                    .push(crate::node::console::parse_log_level(&v).map_err(LaunchError::Args)?);
             }
             "--enclave" | "-e" if ros => cl.enclave = Some(next("--enclave")?),
             other => return Err(LaunchError::Args(format!("unknown argument {other:?}"))),
@@ -722,6 +728,13 @@ pub fn launch_from_args(
     }
     ros_settings.remaps = topic_remaps;
     node.node_name = ros_settings.node_name.clone();
+    // As rcl: a bare level sets the default logger (the node's); `NAME:=LEVEL` sets the logger
+    // of that name, which here is only the node's own (it has no other loggers).
+    for (logger, level) in cl.log_levels {
+        if logger.is_none_or(|l| l == ros_settings.node_name) {
+            ros_settings.log_level = level;
+        }
+    }
     let mut params = collect_params(&cl.files, cl.sets, &ros_settings.node_name)?;
     // Environment first, parameters override it.
     let mut security = SecurityOptions::from_env(&env, None);
@@ -762,6 +775,33 @@ mod tests {
 
     fn args(s: &str) -> Vec<String> {
         s.split_whitespace().map(String::from).collect()
+    }
+
+    #[test]
+    fn log_level_sets_the_node_threshold_and_refuses_unknown_levels() {
+        use ros2_client::log::LogLevel;
+        let none = |_: &str| None;
+        let l = launch_from_args(&args("--ros-args --log-level warn"), none).unwrap();
+        assert_eq!(l.ros.log_level, LogLevel::Warn);
+        assert_eq!(
+            launch_from_args(&args("--ros-args"), none)
+                .unwrap()
+                .ros
+                .log_level,
+            LogLevel::Info
+        );
+        // A named logger: the node's own name applies, another logger's does not.
+        let l = launch_from_args(
+            &args(
+                "--ros-args -r __node:=tracker --log-level tracker:=error --log-level rcl:=debug",
+            ),
+            none,
+        )
+        .unwrap();
+        assert_eq!(l.ros.log_level, LogLevel::Error);
+        let e = launch_from_args(&args("--ros-args --log-level loud"), none).unwrap_err();
+        assert!(e.to_string().contains("--log-level"), "{e}");
+        assert!(launch_from_args(&args("--ros-args --log-level"), none).is_err());
     }
 
     #[test]

@@ -182,6 +182,8 @@ pub struct RosSettings {
     /// DDS Security: off, or the enclave whose files secure the participant
     /// ([`crate::node::security`]).
     pub security: DdsSecurity,
+    /// Lowest severity logged to the console and `/rosout` (`--ros-args --log-level`).
+    pub log_level: ros2_client::log::LogLevel,
 }
 
 impl Default for RosSettings {
@@ -198,6 +200,7 @@ impl Default for RosSettings {
             debug_image_rate_hz: 0.0,
             image_transport: ImageTransport::Raw,
             security: DdsSecurity::default(),
+            log_level: ros2_client::log::LogLevel::Info,
         }
     }
 }
@@ -673,17 +676,12 @@ struct Worker<'a> {
 
 impl Worker<'_> {
     fn log(&self, level: ros2_client::log::LogLevel, text: &str) {
+        if level < self.settings.log_level {
+            return;
+        }
         let text = &crate::node::console::printable(text, crate::node::console::MAX_LOG_CHARS);
         ros2_client::rosout!(self.ep.node, level, "{}", text);
-        eprintln!(
-            "{}",
-            crate::node::console::line(
-                level,
-                std::time::SystemTime::now(),
-                &self.settings.node_name,
-                text
-            )
-        );
+        crate::node::console::log(level, level, &self.settings.node_name, text);
     }
 
     fn publish(&self, o: &FrameOutputs) {

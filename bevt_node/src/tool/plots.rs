@@ -237,55 +237,68 @@ pub fn plot_curves(
     let legend = legend_layout(curves, |t| {
         font.box_size(t).map_or(8 * t.len() as u32, |s| s.0)
     });
-    let styles = series_styles(curves);
-    let root = BitMapBackend::new(path, (legend.image_width, SIZE.1)).into_drawing_area();
     let e = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
-    root.fill(&WHITE).map_err(|x| e(&x))?;
-    let (chart_area, _) = root.split_horizontally(SIZE.0);
-    let mut chart = ChartBuilder::on(&chart_area)
-        .caption(title, ("sans-serif", 26))
-        .margin(16)
-        // Room for the last x tick label, which would be clipped at the legend's edge.
-        .margin_right(28)
-        .x_label_area_size(48)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0.0..x_max, 0.0..1.0)
+    // Drawn into memory and written with the `image` crate the tool already uses for frames:
+    // plotters' own PNG encoder would build a second, older `image` and `png` (issue 18's
+    // first build). The size is the legend's layout's: bounded by the number of curves.
+    let (width, height) = (legend.image_width, SIZE.1);
+    let styles = series_styles(curves);
+    let draw = |pixels: &mut [u8]| -> Result<(), String> {
+        let root = BitMapBackend::with_buffer(pixels, (width, height)).into_drawing_area();
+        root.fill(&WHITE).map_err(|x| e(&x))?;
+        let (chart_area, _) = root.split_horizontally(SIZE.0);
+        let mut chart = ChartBuilder::on(&chart_area)
+            .caption(title, ("sans-serif", 26))
+            .margin(16)
+            // Room for the last x tick label, which would be clipped at the legend's edge.
+            .margin_right(28)
+            .x_label_area_size(48)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..x_max, 0.0..1.0)
+            .map_err(|x| e(&x))?;
+        chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .label_style(("sans-serif", 16))
+            .draw()
+            .map_err(|x| e(&x))?;
+        let plotting = chart.plotting_area();
+        // Peers from the lowest score up, ours last: the emphasised curve stays on top.
+        let mut order = by_score(curves);
+        order.reverse();
+        order.sort_by_key(|&i| curves[i].own);
+        for i in order {
+            let c = &curves[i];
+            let n = c.values.len().max(2) - 1;
+            let pts: Vec<(f64, f64)> = c
+                .values
+                .iter()
+                .enumerate()
+                .map(|(k, &v)| (x_max * k as f64 / n as f64, v))
+                .collect();
+            draw_styled(plotting, pts, &styles[i]).map_err(|x| e(&x))?;
+        }
+        for entry in &legend.entries {
+            let swatch = vec![(entry.x, entry.y), (entry.x + SWATCH, entry.y)];
+            draw_styled(&root, swatch, &entry.style).map_err(|x| e(&x))?;
+            let style = font.color(&BLACK).pos(Pos::new(HPos::Left, VPos::Center));
+            root.draw(&Text::new(
+                entry.label.clone(),
+                (entry.x + SWATCH + GAP, entry.y),
+                style,
+            ))
+            .map_err(|x| e(&x))?;
+        }
+        root.present().map_err(|x| e(&x))
+    };
+    let mut pixels = vec![0u8; width as usize * height as usize * 3];
+    draw(&mut pixels)?;
+    let image = image::RgbImage::from_raw(width, height, pixels)
+        .ok_or_else(|| e(&"plot buffer does not match its size"))?;
+    image
+        .save_with_format(path, image::ImageFormat::Png)
         .map_err(|x| e(&x))?;
-    chart
-        .configure_mesh()
-        .x_desc(x_label)
-        .y_desc(y_label)
-        .label_style(("sans-serif", 16))
-        .draw()
-        .map_err(|x| e(&x))?;
-    let plotting = chart.plotting_area();
-    // Peers from the lowest score up, ours last: the emphasised curve stays on top.
-    let mut order = by_score(curves);
-    order.reverse();
-    order.sort_by_key(|&i| curves[i].own);
-    for i in order {
-        let c = &curves[i];
-        let n = c.values.len().max(2) - 1;
-        let pts: Vec<(f64, f64)> = c
-            .values
-            .iter()
-            .enumerate()
-            .map(|(k, &v)| (x_max * k as f64 / n as f64, v))
-            .collect();
-        draw_styled(plotting, pts, &styles[i]).map_err(|x| e(&x))?;
-    }
-    for entry in &legend.entries {
-        let swatch = vec![(entry.x, entry.y), (entry.x + SWATCH, entry.y)];
-        draw_styled(&root, swatch, &entry.style).map_err(|x| e(&x))?;
-        let style = font.color(&BLACK).pos(Pos::new(HPos::Left, VPos::Center));
-        root.draw(&Text::new(
-            entry.label.clone(),
-            (entry.x + SWATCH + GAP, entry.y),
-            style,
-        ))
-        .map_err(|x| e(&x))?;
-    }
-    root.present().map_err(|x| e(&x))?;
     Ok(legend)
 }
 
