@@ -324,8 +324,8 @@ fn peers(domain: u16) -> Peers {
     }
 }
 
-/// Initialises the track on a recent frame; true when the node accepted.
-fn reinit(p: &Peers) -> bool {
+/// The node's answer to a reinit with a box of a frame ~100 ms old: success, and the message.
+fn reinit(p: &Peers) -> (bool, String) {
     let end = Instant::now() + Duration::from_secs(20);
     loop {
         let recent = {
@@ -343,7 +343,7 @@ fn reinit(p: &Peers) -> bool {
             let req: ReinitRequest =
                 bevt_node::convert::reinit_request(b, Time::from_nanos(stamp), "");
             if let Some(r) = p.gs.reinit(&req, Duration::from_secs(5)) {
-                return r.success;
+                return (r.success, r.message);
             }
         }
         assert!(Instant::now() < end, "no reinit answer from the node");
@@ -383,7 +383,8 @@ fn crafted_datafrag_floods_leave_the_node_alive_bounded_and_tracking() {
     let d = bevt_tests::dds_domain();
     let mut node = NodeProcess::spawn(d);
     let p = peers(d);
-    assert!(reinit(&p), "the node refused a valid reinit");
+    let (ok, why) = reinit(&p);
+    assert!(ok, "the node refused a valid reinit: {why}");
     let (n, good) = detections(&p, Duration::from_secs(2), 5.0);
     assert!(
         n >= 10 && good * 10 >= n * 9,
