@@ -66,7 +66,7 @@ arm_bin="$target_dir/$triple/debug"
 for prog in bevt_node bevt; do
   file -b "$arm_bin/$prog" | grep -q 'ARM aarch64' || fail "$arm_bin/$prog is not an aarch64 program"
   help=$("${qemu[@]}" "$arm_bin/$prog" --help) || fail "$prog --help under qemu exited with $?"
-  grep -q '^Usage: ' <<<"$help" || fail "$prog --help under qemu printed no usage line"
+  grep -q '^Usage:' <<<"$help" || fail "$prog --help under qemu printed no usage line"
 done
 
 step "native bevt (x86_64)"
@@ -84,15 +84,22 @@ step "bevt eval --sequences $sequence: x86_64, then aarch64 under qemu"
 
 step "compare boxes (tolerance $tolerance px)"
 python3 - "$work/x86_64/$sequence.txt" "$work/aarch64/$sequence.txt" "$tolerance" <<'EOF'
+import math
 import sys
 
 def boxes(path):
     rows = []
-    with open(path) as f:
-        for line in f:
-            line = line.strip()
-            if line:
-                rows.append([float(v) for v in line.replace("\t", ",").split(",")])
+    try:
+        with open(path) as f:
+            for n, line in enumerate(f, start=1):
+                line = line.strip()
+                if line:
+                    row = [float(v) for v in line.replace("\t", ",").split(",")]
+                    if not all(math.isfinite(v) for v in row):
+                        sys.exit(f"{path}:{n}: not a finite box: {line}")
+                    rows.append(row)
+    except (OSError, ValueError) as e:
+        sys.exit(f"cannot read boxes: {e}")
     return rows
 
 x86, arm, tol = boxes(sys.argv[1]), boxes(sys.argv[2]), float(sys.argv[3])
