@@ -350,6 +350,13 @@ pub struct TrackStateConfig {
     pub drift_check_frames: usize,
     /// Verifier score (logit margin) below which a drift check makes the state uncertain.
     pub drift_threshold: f32,
+    /// After a failed drift check, the next one this many confident frames later; failing
+    /// it too makes the track lost on drift. 0: a failed check never makes it lost (it
+    /// is re-checked every `drift_check_frames`).
+    pub drift_recheck_frames: usize,
+    /// Ask the verifier on an unconfident (`uncertain`) frame; a score at or above
+    /// `redetection.verifier_threshold` reports it `tracking` (reason: confirmed).
+    pub verify_low_confidence: bool,
 }
 
 impl Default for TrackStateConfig {
@@ -359,6 +366,8 @@ impl Default for TrackStateConfig {
             lost_frames: 12,
             drift_check_frames: 15,
             drift_threshold: 4.0,
+            drift_recheck_frames: 3,
+            verify_low_confidence: true,
         }
     }
 }
@@ -765,6 +774,7 @@ impl TrackerConfig {
         int_key("track_state.lost_frames", t.lost_frames)?;
         int_key("track_state.drift_check_frames", t.drift_check_frames)?;
         float_key("track_state.drift_threshold", t.drift_threshold)?;
+        int_key("track_state.drift_recheck_frames", t.drift_recheck_frames)?;
         let r = &self.redetection;
         int_key("redetection.windows_per_frame", r.windows_per_frame)?;
         keys::spec("redetection.scales").check_list(&r.scales)?;

@@ -498,6 +498,10 @@ pub static TRACKER_KEYS: &[KeySpec] = &[
         "Drift check: every this many confident frames the learned verifier scores the box against the first frame's template (0 = off; off without `redetection.verifier`). 15: one pass (about 27 ms on the 2-core dev VM) every 15 frames costs about 9 % of a 21 ms frame, near the 10 % budget; checks every 4 frames cost 24 %."),
     key("track_state.drift_threshold", Float, closed(-100.0, 100.0), "logit margin", LIVE,
         "Verifier score below which a drift check makes a confident frame uncertain (reason: drift). 4.0: below the re-acquisition bar (`redetection.verifier_threshold` 5.0), so a box the verifier would nearly accept is not a drift; on the dev set, boxes on the target score 5.3 or more (5th percentile per sequence), boxes off it in car14 and wakeboard4 4.1 or less (95th), and leave-one-sequence-out picks 4.0 for 6 of 7 folds."),
+    key("track_state.drift_recheck_frames", Int, int(0, 10_000), "frames", LIVE,
+        "After a failed drift check, the next check this many confident frames later (instead of `drift_check_frames`); failing it too makes the track lost on drift: the model and re-detection template go back to the last agreeing check's, and re-detection starts from the box (0 = a failed check never makes the track lost). 3: a second opinion on other frames (the box moves, the camera too) within a third of a second at 10 fps, before the learned filter has taken in much more of what it drifted onto."),
+    key("track_state.verify_low_confidence", Bool, Range::Any, "", LIVE,
+        "Ask the verifier on a low-confidence (`uncertain`) frame: a score at or above `redetection.verifier_threshold` (the bar a re-acquisition must pass) reports the frame `tracking` (reason: confirmed) and publishes the confidence raised to `lost_threshold`; the unconfident frame still counts towards `lost_frames`. Off without a verifier."),
     // redetection
     key("redetection.enabled", Bool, Range::Any, "", FIXED,
         "Search the frame for a lost target; off: only the window at the last known position is searched (with the same confirmation), at the scale of the loss."),

@@ -263,6 +263,10 @@ impl std::fmt::Debug for NodeCore {
 /// `track_status` state and reason of one tracked frame.
 fn status_of(o: &TrackOutput) -> (u8, String) {
     match o.state {
+        // Tracking with a reason: unconfident, but the verifier confirmed the target.
+        TrackState::Tracking if !matches!(o.reason, bevt_core::StateReason::Confident) => {
+            (TrackStatus::STATE_TRACKING, o.reason.to_string())
+        }
         TrackState::Tracking if o.learned => (TrackStatus::STATE_TRACKING, String::new()),
         TrackState::Tracking => (
             TrackStatus::STATE_LOW_CONSENSUS,
