@@ -416,6 +416,11 @@ pub struct RedetectionConfig {
     /// Foreground logit margin (head classification, foreground − background) at or above
     /// which a verifier hit is a candidate.
     pub verifier_threshold: f32,
+    /// A verifier candidate confirmed for `reacquire_frames` frames takes the track back
+    /// only when the frozen filter, evaluated there, would make it a candidate too
+    /// (`reacquire_threshold`, `reacquire_relative`). Off by default: it refuses a
+    /// look-alike, but on the dev set also the real target after a long loss.
+    pub verifier_filter_check: bool,
 }
 
 /// The learned re-detection verifier (`redetection.verifier`).
@@ -450,6 +455,7 @@ impl Default for RedetectionConfig {
             verifier_windows: 16,
             verifier_scales: vec![1.0, 0.7],
             verifier_threshold: 5.0,
+            verifier_filter_check: false,
         }
     }
 }
@@ -1037,7 +1043,7 @@ mod tests {
                 k.name
             );
         }
-        assert_eq!(live_keys().count(), 20);
+        assert_eq!(live_keys().count(), 22);
     }
 
     #[test]

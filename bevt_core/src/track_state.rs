@@ -128,6 +128,14 @@ impl fmt::Display for StateReason {
                 confidence,
                 threshold,
                 frames,
+            } if confidence >= threshold => write!(
+                f,
+                "target lost: searching for {frames} frames (a candidate at confidence {confidence:.2}, not yet confirmed)"
+            ),
+            Self::Lost {
+                confidence,
+                threshold,
+                frames,
             } => write!(
                 f,
                 "target lost: confidence {confidence:.2} below {threshold:.2} for {frames} frames"

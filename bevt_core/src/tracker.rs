@@ -1144,7 +1144,7 @@ mod tests {
     /// the track is lost at most 5 + 2 frames (plus one frame of the verifier's latency)
     /// after the target has gone, and not before. Every visible frame is `tracking`;
     /// from the first drift flag on, no frame is reported `tracking` with the box on the
-    /// background, and every flagged frame publishes a confidence of 0 (at most
+    /// background, and the frames the check flags publish a confidence of 0 (at most
     /// `lost_threshold` · score / `drift_threshold`).
     #[test]
     fn a_confirmed_drift_makes_the_track_lost_with_its_reason() {
@@ -1199,9 +1199,11 @@ mod tests {
         assert!(flagged <= lost, "{states:?}");
         for o in &out[flagged..] {
             assert_ne!(o.state, TrackState::Tracking, "{states:?}");
+            // The frames the check decided (searching frames publish the best search
+            // window's confidence, as after any loss).
             if matches!(
                 o.reason,
-                StateReason::OffTarget { .. } | StateReason::Drifted { .. }
+                StateReason::OffTarget { .. } | StateReason::Drifted { frames: 1, .. }
             ) {
                 assert_eq!(o.confidence, 0.0, "{o:?}");
             }

@@ -244,7 +244,9 @@ fn hit_scale(st: &State, hit: &VerifierHit) -> f32 {
 
 /// One lost frame of the learned verifier: follow its candidate, spend the rest of
 /// `verifier_windows` on the whole-frame tiles; the candidate once it has been above
-/// `verifier_threshold` for `reacquire_frames` frames in a row.
+/// `verifier_threshold` for `reacquire_frames` frames in a row and (with
+/// `verifier_filter_check`) the frozen filter makes it a candidate too. A candidate the
+/// filter refuses is dropped (it must be confirmed anew).
 fn verify(
     st: &mut State,
     frame: &Frame<'_>,
@@ -280,10 +282,18 @@ fn verify(
             st.lost.vcand.offer(h.pos, scale, h.score, thr);
         }
     }
-    Ok(st
-        .lost
-        .vcand
-        .end_frame(spec.config.redetection.reacquire_frames))
+    let Some(c) = st.lost.vcand.end_frame(r.reacquire_frames) else {
+        return Ok(None);
+    };
+    if r.verifier_filter_check {
+        // The second witness: the frozen filter must find a candidate there too.
+        let (_, conf, _) = evaluate(st, frame, c.pos, c.scale, spec)?;
+        if conf.is_nan() || conf < st.lost.threshold {
+            st.lost.vcand.clear();
+            return Ok(None);
+        }
+    }
+    Ok(Some(c))
 }
 
 /// One search window at `center` and absolute `scale`: the position the frozen filter
