@@ -1219,6 +1219,38 @@ mod tests {
         }
     }
 
+    /// Issue 20: on a visible target the verifier confirms unconfident frames. With a
+    /// confidence threshold no frame reaches, frames are reported `tracking` with the
+    /// confirmation reason and publish the threshold; the state machine still counts them
+    /// (the boxes are those without the confirmation), so the track is lost after
+    /// `lost_frames` of them. Without the confirmation they are `uncertain`.
+    #[test]
+    fn the_verifier_confirms_unconfident_frames_on_the_target() {
+        let seq = SynthParams::default();
+        let mut cfg = TrackerConfig::default();
+        cfg.track_state.lost_threshold = 0.99;
+        cfg.track_state.lost_frames = 5;
+        let mut t = started(&seq, &cfg);
+        for i in 1..=5 {
+            let f = seq.frame(i);
+            let frame = Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+            let o = t.update(&frame).unwrap();
+            if i < 5 {
+                assert_eq!(o.state, TrackState::Tracking, "{o:?}");
+                assert!(matches!(o.reason, StateReason::Confirmed { score, .. } if score >= 5.0));
+                assert!(o.confidence >= 0.99, "{o:?}");
+            } else {
+                assert_eq!(o.state, TrackState::Lost, "{o:?}");
+            }
+        }
+        cfg.track_state.verify_low_confidence = false;
+        let s = states(&seq, &cfg);
+        assert!(
+            s[..4].iter().all(|(s, _)| *s == TrackState::Uncertain),
+            "{s:?}"
+        );
+    }
+
     /// The config with the learned box on the filter on (`box_refine.mode: nanotrack`).
     fn refined(cfg: &TrackerConfig) -> TrackerConfig {
         let mut c = cfg.clone();
@@ -1373,11 +1405,13 @@ mod tests {
         let cfg = TrackerConfig::default();
         let mut t = started(&seq, &cfg);
         assert_eq!(track(&mut t, &seq, 1..15), TrackState::Tracking);
-        // A confidence threshold no frame reaches: the same track turns uncertain, then
-        // lost after `lost_frames` frames, with no new initialisation.
+        // A confidence threshold no frame reaches, and no verifier to confirm the target
+        // on unconfident frames: the same track turns uncertain, then lost after
+        // `lost_frames` frames, with no new initialisation.
         let mut strict = cfg.clone();
         strict.track_state.lost_threshold = 1.0;
         strict.track_state.lost_frames = 3;
+        strict.track_state.verify_low_confidence = false;
         t.retune(strict.validate().unwrap()).unwrap();
         assert_eq!(t.spec().config.track_state.lost_frames, 3);
         assert_eq!(track(&mut t, &seq, 15..17), TrackState::Uncertain);
