@@ -350,6 +350,13 @@ pub struct TrackStateConfig {
     pub drift_check_frames: usize,
     /// Verifier score (logit margin) below which a drift check makes the state uncertain.
     pub drift_threshold: f32,
+    /// After a failed drift check, the next one this many confident frames later; failing
+    /// it too makes the track lost on drift. 0: a failed check never makes it lost (it
+    /// is re-checked every `drift_check_frames`).
+    pub drift_recheck_frames: usize,
+    /// Ask the verifier on an unconfident (`uncertain`) frame; a score at or above
+    /// `redetection.verifier_threshold` reports it `tracking` (reason: confirmed).
+    pub verify_low_confidence: bool,
 }
 
 impl Default for TrackStateConfig {
@@ -359,6 +366,8 @@ impl Default for TrackStateConfig {
             lost_frames: 12,
             drift_check_frames: 15,
             drift_threshold: 4.0,
+            drift_recheck_frames: 3,
+            verify_low_confidence: true,
         }
     }
 }
@@ -407,6 +416,11 @@ pub struct RedetectionConfig {
     /// Foreground logit margin (head classification, foreground − background) at or above
     /// which a verifier hit is a candidate.
     pub verifier_threshold: f32,
+    /// A verifier candidate confirmed for `reacquire_frames` frames takes the track back
+    /// only when the frozen filter, evaluated there, would make it a candidate too
+    /// (`reacquire_threshold`, `reacquire_relative`). Off by default: it refuses a
+    /// look-alike, but on the dev set also the real target after a long loss.
+    pub verifier_filter_check: bool,
 }
 
 /// The learned re-detection verifier (`redetection.verifier`).
@@ -441,6 +455,7 @@ impl Default for RedetectionConfig {
             verifier_windows: 16,
             verifier_scales: vec![1.0, 0.7],
             verifier_threshold: 5.0,
+            verifier_filter_check: false,
         }
     }
 }
@@ -765,6 +780,7 @@ impl TrackerConfig {
         int_key("track_state.lost_frames", t.lost_frames)?;
         int_key("track_state.drift_check_frames", t.drift_check_frames)?;
         float_key("track_state.drift_threshold", t.drift_threshold)?;
+        int_key("track_state.drift_recheck_frames", t.drift_recheck_frames)?;
         let r = &self.redetection;
         int_key("redetection.windows_per_frame", r.windows_per_frame)?;
         keys::spec("redetection.scales").check_list(&r.scales)?;
@@ -1027,7 +1043,7 @@ mod tests {
                 k.name
             );
         }
-        assert_eq!(live_keys().count(), 20);
+        assert_eq!(live_keys().count(), 22);
     }
 
     #[test]

@@ -7,12 +7,17 @@
 //!    │        confidence ≥ lost_threshold                                          │
 //!    │                          a re-detection candidate confident for            │
 //!    └──────── Reacquired ◀──── reacquire_frames frames in a row ◀────────────────┘
+//! Tracking ── a drift check fails, and its re-check fails too ─────────────────▶ Lost
 //! ```
 //!
 //! [`TrackState::Reacquired`] is
 //! reported on the one frame the track is taken back; the next frame is `Tracking` or
-//! `Uncertain` again. Each state comes with a [`StateReason`] that prints as the operator
-//! reads it ("target lost: confidence 0.08 below 0.25 for 10 frames").
+//! `Uncertain` again. The drift check (`tracker/drift.rs`) also overrules what is reported
+//! without moving the machine: a confident frame whose box the verifier disputes is
+//! reported `Uncertain` ([`StateMachine::off_target`]), an unconfident one it confirms
+//! `Tracking` ([`StateMachine::confirmed`]). Each state comes with a [`StateReason`] that
+//! prints as the operator reads it ("target lost: confidence 0.08 below 0.25 for 10
+//! frames").
 
 use crate::config::TrackStateConfig;
 use serde::{Deserialize, Serialize};
@@ -80,6 +85,26 @@ pub enum StateReason {
         /// The threshold (`track_state.drift_threshold`).
         threshold: f32,
     },
+    /// Lost on drift: a drift check failed and the re-check soon after failed too, or one
+    /// check scored below `track_state.drift_lost_threshold` (the box is on something
+    /// else); the model is frozen and re-detection searches from the drift point.
+    Drifted {
+        /// The verifier's score at the check that made the track lost.
+        score: f32,
+        /// The threshold (`track_state.drift_threshold`).
+        threshold: f32,
+        /// Frames spent lost, this one included.
+        frames: usize,
+    },
+    /// The confidence is below the threshold, but the learned verifier, asked because of
+    /// it, finds the first frame's target at the box (score at or above
+    /// `redetection.verifier_threshold`, the bar of a re-acquisition): reported `tracking`.
+    Confirmed {
+        /// This frame's confidence.
+        confidence: f32,
+        /// The verifier's score at the box.
+        score: f32,
+    },
     /// Found again after `after` lost frames.
     Reacquired {
         /// Frames spent lost.
@@ -103,6 +128,14 @@ impl fmt::Display for StateReason {
                 confidence,
                 threshold,
                 frames,
+            } if confidence >= threshold => write!(
+                f,
+                "target lost: searching for {frames} frames (a candidate at confidence {confidence:.2}, not yet confirmed)"
+            ),
+            Self::Lost {
+                confidence,
+                threshold,
+                frames,
             } => write!(
                 f,
                 "target lost: confidence {confidence:.2} below {threshold:.2} for {frames} frames"
@@ -110,6 +143,18 @@ impl fmt::Display for StateReason {
             Self::OffTarget { score, threshold } => write!(
                 f,
                 "drift: the box does not match the first frame's target (verifier score {score:.1} below {threshold:.1})"
+            ),
+            Self::Drifted {
+                score,
+                threshold,
+                frames,
+            } => write!(
+                f,
+                "target lost: the box drifted off the first frame's target (verifier score {score:.1} below {threshold:.1}); searching for {frames} frames"
+            ),
+            Self::Confirmed { confidence, score } => write!(
+                f,
+                "low confidence {confidence:.2}, but the verifier finds the target at the box (score {score:.1})"
             ),
             Self::Reacquired { after } => write!(f, "re-acquired after {after} frames"),
         }
@@ -123,6 +168,8 @@ pub struct StateMachine {
     state: TrackState,
     below: usize,
     lost_for: usize,
+    /// Set while lost on drift: the verifier's score and threshold that made it lost.
+    drifted: Option<(f32, f32)>,
 }
 
 impl StateMachine {
@@ -133,6 +180,7 @@ impl StateMachine {
             state: TrackState::Tracking,
             below: 0,
             lost_for: 0,
+            drifted: None,
         }
     }
 
@@ -145,6 +193,11 @@ impl StateMachine {
     /// The current state.
     pub fn state(&self) -> TrackState {
         self.state
+    }
+
+    /// Lost on drift ([`Self::drift_lost`]) rather than on low confidence.
+    pub fn drifted(&self) -> bool {
+        self.state == TrackState::Lost && self.drifted.is_some()
     }
 
     /// Frames spent lost so far (0 unless lost).
@@ -165,6 +218,7 @@ impl StateMachine {
         if self.below >= p.lost_frames {
             self.state = TrackState::Lost;
             self.lost_for = 0;
+            self.drifted = None;
             (self.state, self.lost_reason(confidence))
         } else {
             self.state = TrackState::Uncertain;
@@ -191,12 +245,48 @@ impl StateMachine {
         )
     }
 
+    /// A frame the confidence found confident, made lost by a confirmed drift check: the
+    /// verifier scored the box `score`, below `threshold`. The lost state starts on this
+    /// frame, as after `lost_frames` unconfident ones.
+    pub fn drift_lost(&mut self, score: f32, threshold: f32) -> (TrackState, StateReason) {
+        self.state = TrackState::Lost;
+        self.lost_for = 0;
+        self.drifted = Some((score, threshold));
+        (
+            self.state,
+            StateReason::Drifted {
+                score,
+                threshold,
+                frames: 1,
+            },
+        )
+    }
+
+    /// A frame [`Self::track`] found unconfident (`uncertain`, not lost), overruled by the
+    /// verifier finding the target at the box with `score`: reported `tracking`. As for
+    /// [`Self::off_target`], the machine itself is unchanged (the unconfident frame still
+    /// counts towards `lost_frames`).
+    pub fn confirmed(&self, confidence: f32, score: f32) -> (TrackState, StateReason) {
+        (
+            TrackState::Tracking,
+            StateReason::Confirmed { confidence, score },
+        )
+    }
+
     /// One lost frame searched without success; `confidence` is the best candidate's.
     pub fn searching(&mut self, confidence: f32) -> (TrackState, StateReason) {
         self.below = self.below.saturating_add(1);
         self.lost_for = self.lost_for.saturating_add(1);
         self.state = TrackState::Lost;
-        (self.state, self.lost_reason(confidence))
+        let reason = match self.drifted {
+            Some((score, threshold)) => StateReason::Drifted {
+                score,
+                threshold,
+                frames: self.lost_for.saturating_add(1),
+            },
+            None => self.lost_reason(confidence),
+        };
+        (self.state, reason)
     }
 
     /// The search confirmed the target on this frame.
@@ -204,6 +294,7 @@ impl StateMachine {
         let after = self.lost_for.saturating_add(1);
         self.below = 0;
         self.lost_for = 0;
+        self.drifted = None;
         self.state = TrackState::Reacquired;
         (self.state, StateReason::Reacquired { after })
     }
@@ -268,6 +359,58 @@ mod tests {
         );
         // One unconfident frame after it is the first of `lost_frames`, not the second.
         assert_eq!(m.track(0.1).0, TrackState::Uncertain);
+        assert_eq!(m.track(0.1).0, TrackState::Lost);
+    }
+
+    #[test]
+    fn a_confirmed_drift_is_lost_until_reacquired_and_says_why_while_searching() {
+        let mut m = StateMachine::new(TrackStateConfig {
+            lost_threshold: 0.25,
+            lost_frames: 5,
+            ..TrackStateConfig::default()
+        });
+        assert_eq!(m.track(0.9).0, TrackState::Tracking);
+        assert!(!m.drifted());
+        let (s, r) = m.drift_lost(1.04, 4.0);
+        assert_eq!((s, m.state()), (TrackState::Lost, TrackState::Lost));
+        assert!(m.drifted());
+        assert_eq!(
+            r.to_string(),
+            "target lost: the box drifted off the first frame's target (verifier score 1.0 below 4.0); searching for 1 frames"
+        );
+        let (s, r) = m.searching(0.7);
+        assert_eq!(s, TrackState::Lost);
+        assert!(matches!(r, StateReason::Drifted { frames: 2, .. }), "{r:?}");
+        assert_eq!(m.reacquired().0, TrackState::Reacquired);
+        assert!(!m.drifted());
+        // A later loss on confidence says so.
+        for _ in 0..4 {
+            assert_eq!(m.track(0.1).0, TrackState::Uncertain);
+        }
+        let (s, r) = m.track(0.1);
+        assert_eq!(s, TrackState::Lost);
+        assert!(!m.drifted());
+        assert!(
+            matches!(m.searching(0.1).1, StateReason::Lost { .. }),
+            "{r:?}"
+        );
+    }
+
+    #[test]
+    fn a_confirmed_low_confidence_frame_is_reported_tracking_and_still_counts() {
+        let mut m = StateMachine::new(TrackStateConfig {
+            lost_threshold: 0.25,
+            lost_frames: 2,
+            ..TrackStateConfig::default()
+        });
+        assert_eq!(m.track(0.1).0, TrackState::Uncertain);
+        let (s, r) = m.confirmed(0.1, 6.23);
+        assert_eq!(s, TrackState::Tracking);
+        assert_eq!(m.state(), TrackState::Uncertain);
+        assert_eq!(
+            r.to_string(),
+            "low confidence 0.10, but the verifier finds the target at the box (score 6.2)"
+        );
         assert_eq!(m.track(0.1).0, TrackState::Lost);
     }
 }

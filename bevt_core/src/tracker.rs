@@ -984,16 +984,18 @@ impl Tracker for BevtTracker {
         let warming_up = st.confidence.warming_up();
         let before = st.states.state();
         let decided = st.states.track(confidence);
-        let (state, reason) =
-            drift::check(st, frame, &self.spec, self.verifier.as_deref_mut(), decided)?;
-        // The lost state follows the confidence's decision: a drift check only reports.
-        if lost::after_decision(st, frame, &self.spec, before, decided.0) {
+        let verifier = self.verifier.as_deref_mut();
+        let (state, reason, published) =
+            drift::check(st, frame, &self.spec, verifier, decided, confidence)?;
+        // The lost state follows the state machine (the confidence, or a confirmed drift).
+        let now = st.states.state();
+        if lost::after_decision(st, frame, &self.spec, before, now) {
             return Ok(Self::output_at(
                 st,
                 st.pos,
                 st.scale,
                 (c, false, peak.score),
-                (confidence, state, reason),
+                (published, state, reason),
             ));
         }
         let v = if !vcfg.enabled {
@@ -1038,7 +1040,7 @@ impl Tracker for BevtTracker {
             pos,
             scale,
             (c, learned, peak.score),
-            (confidence, state, reason),
+            (published, state, reason),
         ))
     }
 
@@ -1116,6 +1118,7 @@ mod tests {
     fn drift_flags_only_the_hidden_frames(seq: &SynthParams, hide: usize) {
         let mut cfg = TrackerConfig::default();
         cfg.track_state.lost_threshold = 0.0;
+        cfg.track_state.drift_recheck_frames = 0;
         cfg.track_state.drift_check_frames = 0;
         let off = states(seq, &cfg);
         assert!(off.iter().all(|(s, _)| *s == TrackState::Tracking));
@@ -1133,6 +1136,119 @@ mod tests {
             *s == TrackState::Uncertain && matches!(r, StateReason::OffTarget { .. })
         };
         assert!(on[hide + 1..].iter().all(drift), "{on:?}");
+    }
+
+    /// Issue 20: with the re-check (`drift_recheck_frames`), a drift the verifier confirms
+    /// makes the track lost with its reason, the confidence rule being off
+    /// (`lost_threshold` 0): checks every 5 frames, re-checks 2 frames after a failure, so
+    /// the track is lost at most 5 + 2 frames (plus one frame of the verifier's latency)
+    /// after the target has gone, and not before. Every visible frame is `tracking`;
+    /// from the first drift flag on, no frame is reported `tracking` with the box on the
+    /// background, and the frames the check flags publish a confidence of 0 (at most
+    /// `lost_threshold` · score / `drift_threshold`).
+    #[test]
+    fn a_confirmed_drift_makes_the_track_lost_with_its_reason() {
+        const HIDE: usize = 25;
+        let seq = SynthParams {
+            frames: 45,
+            hidden: Some((HIDE, 45)),
+            ..SynthParams::default()
+        };
+        let mut cfg = TrackerConfig::default();
+        cfg.track_state.lost_threshold = 0.0;
+        cfg.track_state.drift_check_frames = 5;
+        cfg.track_state.drift_recheck_frames = 2;
+        let mut t = started(&seq, &cfg);
+        let out: Vec<TrackOutput> = (1..seq.frames)
+            .map(|i| {
+                let f = seq.frame(i);
+                let frame =
+                    Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+                t.update(&frame).unwrap()
+            })
+            .collect();
+        let states: Vec<_> = out.iter().map(|o| (o.state, o.reason)).collect();
+        // `out[i]` is frame i + 1.
+        assert!(
+            out[..HIDE - 1]
+                .iter()
+                .all(|o| o.state == TrackState::Tracking),
+            "{states:?}"
+        );
+        let lost = out
+            .iter()
+            .position(|o| o.state == TrackState::Lost)
+            .expect("never lost");
+        assert!(
+            (HIDE - 1..=HIDE + 8).contains(&lost),
+            "lost at {lost}: {states:?}"
+        );
+        let first = &out[lost];
+        assert!(
+            matches!(first.reason, StateReason::Drifted { frames: 1, .. }),
+            "{states:?}"
+        );
+        assert!(first
+            .reason
+            .to_string()
+            .starts_with("target lost: the box drifted off the first frame's target"));
+        let flagged = out[HIDE - 1..]
+            .iter()
+            .position(|o| o.state != TrackState::Tracking)
+            .map_or(out.len(), |i| i + HIDE - 1);
+        assert!(flagged <= lost, "{states:?}");
+        for o in &out[flagged..] {
+            assert_ne!(o.state, TrackState::Tracking, "{states:?}");
+            // The frames the check decided (searching frames publish the best search
+            // window's confidence, as after any loss).
+            if matches!(
+                o.reason,
+                StateReason::OffTarget { .. } | StateReason::Drifted { frames: 1, .. }
+            ) {
+                assert_eq!(o.confidence, 0.0, "{o:?}");
+            }
+        }
+        // Searching after a drift keeps saying why, and counts the frames lost.
+        if let Some(o) = out.get(lost + 2) {
+            if o.state == TrackState::Lost {
+                assert!(
+                    matches!(o.reason, StateReason::Drifted { frames: 3, .. }),
+                    "{o:?}"
+                );
+            }
+        }
+    }
+
+    /// Issue 20: on a visible target the verifier confirms unconfident frames. With a
+    /// confidence threshold no frame reaches, frames are reported `tracking` with the
+    /// confirmation reason and publish the threshold; the state machine still counts them
+    /// (the boxes are those without the confirmation), so the track is lost after
+    /// `lost_frames` of them. Without the confirmation they are `uncertain`.
+    #[test]
+    fn the_verifier_confirms_unconfident_frames_on_the_target() {
+        let seq = SynthParams::default();
+        let mut cfg = TrackerConfig::default();
+        cfg.track_state.lost_threshold = 0.99;
+        cfg.track_state.lost_frames = 5;
+        let mut t = started(&seq, &cfg);
+        for i in 1..=5 {
+            let f = seq.frame(i);
+            let frame = Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+            let o = t.update(&frame).unwrap();
+            if i < 5 {
+                assert_eq!(o.state, TrackState::Tracking, "{o:?}");
+                assert!(matches!(o.reason, StateReason::Confirmed { score, .. } if score >= 5.0));
+                assert!(o.confidence >= 0.99, "{o:?}");
+            } else {
+                assert_eq!(o.state, TrackState::Lost, "{o:?}");
+            }
+        }
+        cfg.track_state.verify_low_confidence = false;
+        let s = states(&seq, &cfg);
+        assert!(
+            s[..4].iter().all(|(s, _)| *s == TrackState::Uncertain),
+            "{s:?}"
+        );
     }
 
     /// The config with the learned box on the filter on (`box_refine.mode: nanotrack`).
@@ -1289,11 +1405,13 @@ mod tests {
         let cfg = TrackerConfig::default();
         let mut t = started(&seq, &cfg);
         assert_eq!(track(&mut t, &seq, 1..15), TrackState::Tracking);
-        // A confidence threshold no frame reaches: the same track turns uncertain, then
-        // lost after `lost_frames` frames, with no new initialisation.
+        // A confidence threshold no frame reaches, and no verifier to confirm the target
+        // on unconfident frames: the same track turns uncertain, then lost after
+        // `lost_frames` frames, with no new initialisation.
         let mut strict = cfg.clone();
         strict.track_state.lost_threshold = 1.0;
         strict.track_state.lost_frames = 3;
+        strict.track_state.verify_low_confidence = false;
         t.retune(strict.validate().unwrap()).unwrap();
         assert_eq!(t.spec().config.track_state.lost_frames, 3);
         assert_eq!(track(&mut t, &seq, 15..17), TrackState::Uncertain);

@@ -106,7 +106,13 @@ fn constant_and_black_frames_keep_a_finite_box() {
         for _ in 0..5 {
             let out = t.update(&frame).unwrap();
             assert!(out.bbox.is_finite());
-            assert!(out.consensus > 0.0 && out.consensus <= 1.0);
+            // Lost reports consensus 0 (no response is compared while searching): the drift
+            // check's verifier finds no target in a featureless frame (issue 20).
+            let lost = out.state == bevt_core::TrackState::Lost;
+            assert!(
+                (out.consensus > 0.0 || lost) && (0.0..=1.0).contains(&out.consensus),
+                "{out:?}"
+            );
             assert!(out.bbox.center().distance(&b.center()) < 1.0, "{out:?}");
         }
     }

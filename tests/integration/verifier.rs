@@ -225,15 +225,23 @@ fn nanotrack_verifier_with_a_missing_head_is_an_error() {
 
 /// The look-alike of `lost.rs` (the target's size, rim and colours, another texture; shown
 /// at (120, 250) while the target is hidden, frames 30–49) with the NanoTrack verifier.
-fn look_alike_run() -> (Vec<(bevt_core::TrackOutput, bevt_core::BBox)>, usize) {
+fn look_alike_run(filter_check: bool) -> (Vec<(bevt_core::TrackOutput, bevt_core::BBox)>, usize) {
     let seq = bevt_tests::scenes::with_look_alike();
     let mut cfg = TrackerConfig::default();
+    cfg.redetection.verifier_filter_check = filter_check;
     cfg.redetection.verifier = VerifierKind::Nanotrack;
     cfg.redetection.verifier_backbone = model(BACKBONE);
     cfg.redetection.verifier_head = model(HEAD);
     let r = bevt_tests::track_synthetic(&seq, cfg, seq.truth(0));
-    let states: Vec<_> = r.iter().map(|(o, _)| o.state).collect();
-    println!("{states:?}");
+    for (t, (o, _)) in r.iter().enumerate() {
+        println!(
+            "{} {} {:.2} {}",
+            t + 1,
+            o.state.name(),
+            o.confidence,
+            o.reason
+        );
+    }
     (r, seq.frames)
 }
 
@@ -247,7 +255,7 @@ fn on_look_alike(r: &[(bevt_core::TrackOutput, bevt_core::BBox)], t: usize) -> b
 /// real target is re-acquired after it reappears (frame 50) and kept to the end.
 #[test]
 fn after_a_look_alike_the_target_is_reacquired_and_kept() {
-    let (r, frames) = look_alike_run();
+    let (r, frames) = look_alike_run(false);
     let back = (50..=frames)
         .find(|&t| r[t - 1].0.state == TrackState::Reacquired && !on_look_alike(&r, t))
         .expect("the target was never re-acquired");
@@ -255,24 +263,41 @@ fn after_a_look_alike_the_target_is_reacquired_and_kept() {
 }
 
 /// The wanted behaviour: the look-alike is never reported as the target (no `tracking` or
-/// `reacquired` frame with the box on it). Known defect, so this test is ignored until
-/// drift detection (issue 20) lands: NanoTrack's verifier scores the look-alike like the
-/// target, it is re-acquired at frame 45 and reported `tracking` on frames 46–49 before
-/// the filter, frozen from the real target, finds it unconfident and the track is lost
-/// again (`lost.rs`: without the verifier it is not taken). The drift check
-/// (`tracker/drift.rs`) does not catch it either: it asks the same verifier. Run it with
-/// `--ignored`.
+/// `reacquired` frame with the box on it). Known defect with the default configuration,
+/// so this test is ignored: NanoTrack's verifier scores the look-alike like the target, it
+/// is re-acquired at frame 45 and reported `tracking` on frames 46–49 before the target
+/// returns. The drift check (`tracker/drift.rs`) cannot catch it: it asks the same
+/// verifier. `redetection.verifier_filter_check` fixes it (next test) but is off by
+/// default: on the dev set it also refuses the real target after a long loss (issue 20,
+/// `docs/states.md`). Run it with `--ignored`.
 #[test]
 #[ignore = "known defect: the NanoTrack verifier takes the look-alike (issue 20)"]
 fn the_look_alike_is_never_reported_as_the_target() {
-    let (r, _) = look_alike_run();
+    assert_look_alike_never_claimed(&look_alike_run(false).0);
+}
+
+/// With `redetection.verifier_filter_check` a verifier candidate also needs the frozen
+/// filter's agreement: the filter's relative bound refuses the look-alike (`lost.rs`), so
+/// it is never reported as the target, and the real target is still re-acquired after
+/// it returns (frame 50) and kept.
+#[test]
+fn with_the_filter_check_the_look_alike_is_never_reported_as_the_target() {
+    let (r, frames) = look_alike_run(true);
+    assert_look_alike_never_claimed(&r);
+    let back = (50..=frames)
+        .find(|&t| r[t - 1].0.state == TrackState::Reacquired)
+        .expect("the target was never re-acquired");
+    assert_kept_from(&r, back);
+}
+
+fn assert_look_alike_never_claimed(r: &[(bevt_core::TrackOutput, bevt_core::BBox)]) {
     // `r[t - 1]` is frame t: frames 1..=r.len() (frame 0 is the initialisation).
     let claimed: Vec<usize> = (1..=r.len())
         .filter(|&t| {
             matches!(
                 r[t - 1].0.state,
                 TrackState::Tracking | TrackState::Reacquired
-            ) && on_look_alike(&r, t)
+            ) && on_look_alike(r, t)
         })
         .collect();
     assert!(

@@ -1,18 +1,28 @@
 //! Drift detection of [`super::BevtTracker`] (issue 20): a confident track whose box has
 //! slid onto background or another object keeps a steady confidence, because the filter has
 //! learned what it now sees. The learned verifier (`redetection.verifier`, NanoTrack) holds
-//! the first frame's template and never learns, so it is an independent witness: every
-//! `track_state.drift_check_frames` confident frames it scores the box, and a score below
-//! `track_state.drift_threshold` makes the state `uncertain` (reason
-//! [`StateReason::OffTarget`]) until its next check agrees.
+//! the first frame's template and never learns, so it is an independent witness:
 //!
-//! The check only changes the reported state: the state machine, the lost state (which
-//! model it freezes, which frames refresh the re-detection template) and learning follow
-//! the confidence as before, so accuracy is unchanged. Going `lost` on drift (and
-//! re-detecting from the drift point) is not done yet. Its cost is one network pass every
-//! `drift_check_frames` confident frames.
+//! - every `track_state.drift_check_frames` confident frames it scores the box; a score
+//!   below `track_state.drift_threshold` makes the state `uncertain` (reason
+//!   [`StateReason::OffTarget`]) and brings the next check forward to
+//!   `track_state.drift_recheck_frames` frames later. A second failure in a row makes the
+//!   track lost on drift ([`StateReason::Drifted`]): [`super::lost`] freezes the model of
+//!   the last agreeing check and starts re-detection from the drift point. An agreeing
+//!   check ends the hold and saves the model as the one a loss on drift goes back to
+//!   ([`super::lost::verified`]). After a re-acquisition the first confident frame is
+//!   checked at once, so a candidate the verifier disputes is soon lost again.
+//! - with `track_state.verify_low_confidence`, a low-confidence (`uncertain`) frame is
+//!   scored too: at or above `redetection.verifier_threshold` (the bar of a
+//!   re-acquisition) it is reported `tracking` ([`StateReason::Confirmed`]).
+//!
+//! The published confidence follows the reported state, so a ground station thresholding
+//! the confidence at `track_state.lost_threshold` sees what the state says: a disputed or
+//! drift-lost box publishes at most `lost_threshold · score / drift_threshold`, a confirmed
+//! one at least `lost_threshold`. The cost is one network pass every `drift_check_frames`
+//! confident frames, one per failed check's re-check, and one per low-confidence frame.
 
-use super::State;
+use super::{lost, State};
 use crate::config::TrackerSpec;
 use crate::error::TrackError;
 use crate::image::Frame;
@@ -27,10 +37,36 @@ pub(super) struct DriftCheck {
     off: Option<f32>,
 }
 
-/// A tracked frame the state machine has just `decided` (state and reason): on confident
-/// frames, runs the check when it is due and overrules the state while the last check
-/// disagrees. Any other state ends the hold, and the next confident frame is checked at
-/// once.
+/// What a tracked frame reports: state, reason and the published confidence.
+pub(super) type Report = (TrackState, StateReason, f32);
+
+/// The verifier's best score around the box (`None`: no template, nothing to witness).
+fn score_at_box(
+    st: &State,
+    frame: &Frame<'_>,
+    v: &mut (dyn Verifier + 'static),
+) -> Result<Option<f32>, TrackError> {
+    let size = st.target_size();
+    let side = 2.0 * context_side(size.w, size.h);
+    Ok(v.search(frame, st.pos, side)?.map(|h| h.score))
+}
+
+/// The confidence published with a box the verifier scores `score` below `threshold`:
+/// at most `lost_threshold · score / threshold` (0 for a NaN or negative score).
+fn disputed(confidence: f32, score: f32, threshold: f32, lost_threshold: f32) -> f32 {
+    let f = if threshold > 0.0 && score.is_finite() {
+        (score / threshold).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    confidence.min(lost_threshold * f)
+}
+
+/// A tracked frame the state machine has just `decided` (state and reason) with
+/// `confidence`: runs the checks that are due and returns what is reported. Only a
+/// confirmed drift changes the state machine (it becomes lost, [`super::lost`] takes it
+/// from there); the other outcomes change what is reported. Any state other than
+/// `tracking` ends a hold, and the next confident frame is checked at once.
 ///
 /// # Errors
 /// [`TrackError::Feature`] when the verifier's network fails.
@@ -40,24 +76,77 @@ pub(super) fn check(
     spec: &TrackerSpec,
     verifier: Option<&mut (dyn Verifier + 'static)>,
     decided: (TrackState, StateReason),
-) -> Result<(TrackState, StateReason), TrackError> {
+    confidence: f32,
+) -> Result<Report, TrackError> {
     let t = &spec.config.track_state;
-    let every = t.drift_check_frames;
-    let (Some(v), TrackState::Tracking, true) = (verifier, decided.0, every > 0) else {
+    let unchanged = (decided.0, decided.1, confidence);
+    let Some(v) = verifier else {
         st.drift = DriftCheck::default();
-        return Ok(decided);
+        return Ok(unchanged);
+    };
+    match decided {
+        (TrackState::Tracking, _) if t.drift_check_frames > 0 => {}
+        (TrackState::Uncertain, StateReason::LowConfidence { .. }) if t.verify_low_confidence => {
+            st.drift = DriftCheck::default();
+            let bar = spec.config.redetection.verifier_threshold;
+            return Ok(match score_at_box(st, frame, v)? {
+                Some(s) if s >= bar => {
+                    let (state, reason) = st.states.confirmed(confidence, s);
+                    (state, reason, confidence.max(t.lost_threshold))
+                }
+                _ => unchanged,
+            });
+        }
+        _ => {
+            st.drift = DriftCheck::default();
+            return Ok(unchanged);
+        }
+    }
+    let every = match (st.drift.off, t.drift_recheck_frames) {
+        (Some(_), r) if r > 0 => r.min(t.drift_check_frames),
+        _ => t.drift_check_frames,
     };
     if st.drift.since == 0 || st.drift.since >= every {
         st.drift.since = 0;
-        let size = st.target_size();
-        let side = 2.0 * context_side(size.w, size.h);
-        // No hit at all (no template) counts as agreement: nothing to witness with.
-        let score = v.search(frame, st.pos, side)?.map(|h| h.score);
-        st.drift.off = score.filter(|&s| s.is_nan() || s < t.drift_threshold);
+        match score_at_box(st, frame, v)? {
+            Some(s) if s.is_nan() || s < t.drift_threshold => {
+                if st.drift.off.is_some() && t.drift_recheck_frames > 0 {
+                    st.drift = DriftCheck::default();
+                    let (state, reason) = st.states.drift_lost(s, t.drift_threshold);
+                    let c = disputed(confidence, s, t.drift_threshold, t.lost_threshold);
+                    return Ok((state, reason, c));
+                }
+                st.drift.off = Some(s);
+            }
+            Some(_) => {
+                st.drift.off = None;
+                lost::verified(st);
+            }
+            // No hit at all (no template) counts as agreement: nothing to witness with.
+            None => st.drift.off = None,
+        }
     }
     st.drift.since += 1;
     Ok(match st.drift.off {
-        Some(score) => st.states.off_target(score, t.drift_threshold),
-        None => decided,
+        Some(s) => {
+            let (state, reason) = st.states.off_target(s, t.drift_threshold);
+            let c = disputed(confidence, s, t.drift_threshold, t.lost_threshold);
+            (state, reason, c)
+        }
+        None => unchanged,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::disputed;
+
+    #[test]
+    fn a_disputed_box_publishes_a_confidence_below_the_lost_threshold_by_its_score() {
+        assert_eq!(disputed(0.9, 2.0, 4.0, 0.3), 0.15);
+        assert_eq!(disputed(0.1, 2.0, 4.0, 0.3), 0.1);
+        assert_eq!(disputed(0.9, -1.0, 4.0, 0.3), 0.0);
+        assert_eq!(disputed(0.9, f32::NAN, 4.0, 0.3), 0.0);
+        assert_eq!(disputed(0.9, 3.0, 0.0, 0.3), 0.0);
+    }
 }

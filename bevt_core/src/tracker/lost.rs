@@ -4,9 +4,12 @@
 //! This module owns everything about being lost; the tracker calls it once per frame:
 //!
 //! - [`start`] when a track is initialised (the re-detection template starts from the box);
+//! - [`verified`] when a drift check ([`super::drift`]) agrees with the box: the model and
+//!   template of that frame are the ones a drift loss freezes;
 //! - [`after_decision`] on a tracked frame, right after the state machine decided: it keeps
 //!   the template fresh on confident frames, freezes the model when the track stops being
-//!   confident, and enters the search when the track is lost;
+//!   confident, and enters the search when the track is lost (on drift: with the model and
+//!   template of the last agreeing check, from the drift point);
 //! - [`search`] instead of tracking, on every frame while lost.
 //!
 //! It reads the tracker's geometry and position; only the freeze and the entry into the
@@ -40,18 +43,41 @@ const VERIFIER_TILE_STRIDE: f32 = 0.75;
 /// the candidate.
 const VERIFIER_NEAR: f32 = 0.5;
 
-/// What the tracker keeps for, and while, being lost.
+/// A saved model: filter, appearance model and ideal response, position and scale, and the
+/// learning gate's reference level of the score.
 #[derive(Debug, Default)]
-pub(super) struct LostState {
-    /// Filter, appearance model and ideal response of the last confident frame.
+struct Snapshot {
     g_f: Vec<Complex32>,
     model_xf: Vec<Complex32>,
     m_ideal: Vec<f32>,
     pos: Point2,
     scale: f32,
-    /// The learning gate's reference level of the score on the last confident frame.
     reference: f32,
     saved: bool,
+}
+
+impl Snapshot {
+    fn take(&mut self, st: &State) {
+        self.g_f.clone_from(&st.g_f);
+        self.model_xf.clone_from(&st.model_xf);
+        self.m_ideal.clone_from(&st.m_ideal);
+        self.pos = st.pos;
+        self.scale = st.scale;
+        self.reference = st.confidence.reference();
+        self.saved = true;
+    }
+}
+
+/// What the tracker keeps for, and while, being lost.
+#[derive(Debug, Default)]
+pub(super) struct LostState {
+    /// The model of the last confident frame.
+    last: Snapshot,
+    /// The model and re-detection template of the last frame a drift check agreed with.
+    verified: Snapshot,
+    verified_appearance: Appearance,
+    /// The learning gate's reference level of the frozen model.
+    reference: f32,
     /// The search.
     plan: SearchPlan,
     candidates: CandidateTracker,
@@ -74,6 +100,17 @@ fn template_side(st: &State, scale: f32) -> f32 {
 /// A new track on `frame`: the re-detection template is the initial box.
 pub(super) fn start(st: &mut State, frame: &Frame<'_>) {
     observe(st, frame, true);
+    st.lost.verified.saved = false;
+}
+
+/// A drift check agreed with the box on this (confident, not yet learned) frame: the
+/// model and the re-detection template are the target's, and are what a loss on drift
+/// goes back to.
+pub(super) fn verified(st: &mut State) {
+    let mut v = std::mem::take(&mut st.lost.verified);
+    v.take(st);
+    st.lost.verified = v;
+    st.lost.verified_appearance.clone_from(&st.lost.appearance);
 }
 
 /// A tracked frame whose state the state machine has just decided (`before` → `state`).
@@ -90,10 +127,17 @@ pub(super) fn after_decision(
     state: TrackState,
 ) -> bool {
     let was_confident = matches!(before, TrackState::Tracking | TrackState::Reacquired);
-    if state != TrackState::Tracking && was_confident {
-        snapshot(st);
+    let drifted = st.states.drifted();
+    if state != TrackState::Tracking && was_confident && !drifted {
+        let mut last = std::mem::take(&mut st.lost.last);
+        last.take(st);
+        st.lost.last = last;
     }
     match state {
+        TrackState::Lost if drifted => {
+            enter_on_drift(st, spec);
+            true
+        }
         TrackState::Lost => {
             enter(st, spec);
             true
@@ -114,29 +158,50 @@ fn observe(st: &mut State, frame: &Frame<'_>, first: bool) {
     st.lost.appearance.observe(frame, st.pos, side, rate);
 }
 
-/// Saves the model before the first unconfident frame can be learned.
-fn snapshot(st: &mut State) {
-    let l = &mut st.lost;
-    l.g_f.clone_from(&st.g_f);
-    l.model_xf.clone_from(&st.model_xf);
-    l.m_ideal.clone_from(&st.m_ideal);
-    l.pos = st.pos;
-    l.scale = st.scale;
-    l.reference = st.confidence.reference();
-    l.saved = true;
+/// Swaps the model saved in `snap` in (its position and scale too when `to_saved_pos`).
+fn restore(st: &mut State, snap: &mut Snapshot, to_saved_pos: bool) {
+    std::mem::swap(&mut st.g_f, &mut snap.g_f);
+    std::mem::swap(&mut st.model_xf, &mut snap.model_xf);
+    std::mem::swap(&mut st.m_ideal, &mut snap.m_ideal);
+    if to_saved_pos {
+        st.pos = snap.pos;
+        st.scale = snap.scale;
+    }
+    snap.saved = false;
 }
 
 /// Enters the lost state: restores the last confident model and position, plans the search.
 fn enter(st: &mut State, spec: &TrackerSpec) {
-    let l = &mut st.lost;
-    if l.saved {
-        std::mem::swap(&mut st.g_f, &mut l.g_f);
-        std::mem::swap(&mut st.model_xf, &mut l.model_xf);
-        std::mem::swap(&mut st.m_ideal, &mut l.m_ideal);
-        st.pos = l.pos;
-        st.scale = l.scale;
-        l.saved = false;
+    let mut last = std::mem::take(&mut st.lost.last);
+    st.lost.reference = last.reference;
+    if last.saved {
+        restore(st, &mut last, true);
     }
+    st.lost.last = last;
+    plan(st, spec);
+}
+
+/// Enters the lost state on drift: the box is on something else, so the model (and the
+/// re-detection template) it has learned since the last agreeing check is not the
+/// target's. Restores those of the last agreeing check (the current ones when no check
+/// agreed yet) and plans the search from the drift point (the current position and
+/// scale), where the target was last seen going.
+fn enter_on_drift(st: &mut State, spec: &TrackerSpec) {
+    let mut v = std::mem::take(&mut st.lost.verified);
+    if v.saved {
+        st.lost.reference = v.reference;
+        restore(st, &mut v, false);
+        std::mem::swap(&mut st.lost.appearance, &mut st.lost.verified_appearance);
+    } else {
+        st.lost.reference = st.confidence.reference();
+    }
+    st.lost.verified = v;
+    plan(st, spec);
+}
+
+/// Plans the search from the current position and scale.
+fn plan(st: &mut State, spec: &TrackerSpec) {
+    let l = &mut st.lost;
     l.scale_at_loss = st.scale;
     let confidence = &st.confidence;
     l.threshold = candidate_threshold(&spec.config.redetection, l.reference, |s| {
@@ -179,7 +244,9 @@ fn hit_scale(st: &State, hit: &VerifierHit) -> f32 {
 
 /// One lost frame of the learned verifier: follow its candidate, spend the rest of
 /// `verifier_windows` on the whole-frame tiles; the candidate once it has been above
-/// `verifier_threshold` for `reacquire_frames` frames in a row.
+/// `verifier_threshold` for `reacquire_frames` frames in a row and (with
+/// `verifier_filter_check`) the frozen filter makes it a candidate too. A candidate the
+/// filter refuses is dropped (it must be confirmed anew).
 fn verify(
     st: &mut State,
     frame: &Frame<'_>,
@@ -215,10 +282,18 @@ fn verify(
             st.lost.vcand.offer(h.pos, scale, h.score, thr);
         }
     }
-    Ok(st
-        .lost
-        .vcand
-        .end_frame(spec.config.redetection.reacquire_frames))
+    let Some(c) = st.lost.vcand.end_frame(r.reacquire_frames) else {
+        return Ok(None);
+    };
+    if r.verifier_filter_check {
+        // The second witness: the frozen filter must find a candidate there too.
+        let (_, conf, _) = evaluate(st, frame, c.pos, c.scale, spec)?;
+        if conf.is_nan() || conf < st.lost.threshold {
+            st.lost.vcand.clear();
+            return Ok(None);
+        }
+    }
+    Ok(Some(c))
 }
 
 /// One search window at `center` and absolute `scale`: the position the frozen filter

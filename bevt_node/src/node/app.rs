@@ -263,6 +263,10 @@ impl std::fmt::Debug for NodeCore {
 /// `track_status` state and reason of one tracked frame.
 fn status_of(o: &TrackOutput) -> (u8, String) {
     match o.state {
+        // Tracking with a reason: unconfident, but the verifier confirmed the target.
+        TrackState::Tracking if !matches!(o.reason, bevt_core::StateReason::Confident) => {
+            (TrackStatus::STATE_TRACKING, o.reason.to_string())
+        }
         TrackState::Tracking if o.learned => (TrackStatus::STATE_TRACKING, String::new()),
         TrackState::Tracking => (
             TrackStatus::STATE_LOW_CONSENSUS,
@@ -768,7 +772,60 @@ impl NodeCore {
 mod tests {
     use super::*;
     use bevt_core::eval::synth::SynthParams;
-    use bevt_core::TrackerConfig;
+    use bevt_core::{StateReason, TrackerConfig};
+
+    /// Every state reason of issue 20 reaches `TrackStatus` with the state the tracker
+    /// reported and its sentence: a confirmed low-confidence frame is tracking with its
+    /// reason (not "low consensus"), a drift is uncertain, a drift loss lost.
+    #[test]
+    fn status_of_maps_the_drift_and_confirmation_reasons() {
+        let o = |state, reason, learned| TrackOutput {
+            bbox: BBox {
+                x: 0.0,
+                y: 0.0,
+                w: 10.0,
+                h: 10.0,
+            },
+            consensus: 0.5,
+            learned,
+            peak: 0.1,
+            scale: 1.0,
+            confidence: 0.3,
+            state,
+            reason,
+        };
+        let confirmed = StateReason::Confirmed {
+            confidence: 0.27,
+            score: 7.3,
+        };
+        for learned in [true, false] {
+            let (s, r) = status_of(&o(TrackState::Tracking, confirmed, learned));
+            assert_eq!(s, TrackStatus::STATE_TRACKING);
+            assert_eq!(r, confirmed.to_string());
+            assert!(r.contains("the verifier finds the target"), "{r}");
+        }
+        let off = StateReason::OffTarget {
+            score: 2.3,
+            threshold: 4.0,
+        };
+        let (s, r) = status_of(&o(TrackState::Uncertain, off, true));
+        assert_eq!(
+            (s, r.starts_with("drift:")),
+            (TrackStatus::STATE_UNCERTAIN, true)
+        );
+        let drifted = StateReason::Drifted {
+            score: 1.7,
+            threshold: 4.0,
+            frames: 5,
+        };
+        let (s, r) = status_of(&o(TrackState::Lost, drifted, false));
+        assert_eq!(s, TrackStatus::STATE_LOST);
+        assert!(r.contains("drifted off") && r.contains("5 frames"), "{r}");
+        let (s, r) = status_of(&o(TrackState::Tracking, StateReason::Confident, true));
+        assert_eq!((s, r.as_str()), (TrackStatus::STATE_TRACKING, ""));
+        let (s, _) = status_of(&o(TrackState::Tracking, StateReason::Confident, false));
+        assert_eq!(s, TrackStatus::STATE_LOW_CONSENSUS);
+    }
 
     fn image(seq: &SynthParams, t: usize) -> (Image, BBox) {
         let f = seq.frame(t);

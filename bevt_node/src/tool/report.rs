@@ -378,20 +378,28 @@ pub fn write_result_file(out: &Path, run: &SequenceRun) -> std::io::Result<()> {
     write_state_file(out, run)
 }
 
-/// Writes `<out>/<name>.state.csv`: `frame,confidence,state` per frame (1-based frame
-/// numbers as in the annotation; empty confidence and state `init`/`none` for the init
-/// frame and the frames before it).
+/// Writes `<out>/<name>.state.csv`: `frame,confidence,state,reason` per frame (1-based
+/// frame numbers as in the annotation; empty confidence and state `init`/`none` for the
+/// init frame and the frames before it; the reason as the node publishes it, quoted,
+/// empty when tracking confidently).
 ///
 /// # Errors
 /// I/O errors.
 pub fn write_state_file(out: &Path, run: &SequenceRun) -> std::io::Result<()> {
-    let mut s = String::from("frame,confidence,state\n");
+    let mut s = String::from("frame,confidence,state,reason\n");
     let first = run.run.boxes.iter().position(Option::is_some);
     for (i, o) in run.run.outputs.iter().enumerate() {
         let _ = match o {
-            Some(o) => writeln!(s, "{},{:.4},{}", i + 1, o.confidence, o.state.name()),
-            None if Some(i) == first => writeln!(s, "{},,init", i + 1),
-            None => writeln!(s, "{},,none", i + 1),
+            Some(o) => writeln!(
+                s,
+                "{},{:.4},{},\"{}\"",
+                i + 1,
+                o.confidence,
+                o.state.name(),
+                o.reason.to_string().replace('"', "'")
+            ),
+            None if Some(i) == first => writeln!(s, "{},,init,", i + 1),
+            None => writeln!(s, "{},,none,", i + 1),
         };
     }
     std::fs::write(out.join(format!("{}.state.csv", run.name)), s)
