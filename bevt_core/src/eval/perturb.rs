@@ -14,11 +14,13 @@
 //! | `blur` | σ in 0..=8 px | Gaussian blur (separable, radius ⌈3σ⌉, edges clamped) |
 //! | `light` | G in 1..=4 | gain G^sin(2πt/P) on every channel, clamped at 255 |
 //! | `gamma` | Γ in 1..=3 | gamma Γ^sin(2πt/1.5P) |
+//! | `lookalike` | K in 1.5..=8 | a copy of the initial target, at the target's current size, pasted K target widths to its right (left when that leaves the frame) on every frame: a same-class neighbour ([`SequencePerturbation::paste_lookalike`]) |
 //! | `period` | P in 4..=100000 frames | period of the time-varying terms (default 40) |
 //! | `seed` | u64 | seed of the shake (mixed with the sequence name) |
 //!
 //! Order: tiny, then the geometric warp (zoom, aspect, shake as one bilinear resampling,
-//! borders filled with grey 128), then blur, then the photometric terms. The box follows
+//! borders filled with grey 128), then blur, then the photometric terms, then the look-alike
+//! (pasted by the caller, who holds the initial frame's patch and the frame's truth). The box follows
 //! the geometry exactly (`x' = c + s·(x − c) + d` per axis, `c` the frame centre); a box
 //! moved wholly off the frame becomes absent (`None`, as a NaN annotation row). Frame `t =
 //! 0` is only changed by `tiny` and `blur` (every time-varying term is 1 or 0 there), so
@@ -84,7 +86,7 @@ pub enum PerturbError {
     },
 }
 
-const KEYS: &str = "tiny, zoom, aspect, shake, blur, light, gamma, period, seed";
+const KEYS: &str = "tiny, zoom, aspect, shake, blur, light, gamma, lookalike, period, seed";
 
 /// A perturbation (see the module documentation). The default changes nothing.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -103,6 +105,8 @@ pub struct Perturbation {
     pub light: f32,
     /// Gamma amplitude, 1..=3 (1 = none).
     pub gamma: f32,
+    /// Look-alike distance in target widths, 1.5..=8 (0 = none).
+    pub lookalike: f32,
     /// Period of the time-varying terms, frames.
     pub period: u32,
     /// Seed of the shake.
@@ -119,6 +123,7 @@ impl Default for Perturbation {
             blur: 0.0,
             light: 1.0,
             gamma: 1.0,
+            lookalike: 0.0,
             period: DEFAULT_PERIOD,
             seed: 0,
         }
@@ -192,6 +197,10 @@ impl Perturbation {
                 "blur" => p.blur = parse_f32(k, v, 0.0, 8.0, false, "a sigma in 0..=8 px")?,
                 "light" => p.light = parse_f32(k, v, 1.0, 4.0, false, "a gain amplitude in 1..=4")?,
                 "gamma" => p.gamma = parse_f32(k, v, 1.0, 3.0, false, "an amplitude in 1..=3")?,
+                "lookalike" => {
+                    p.lookalike =
+                        parse_f32(k, v, 1.5, 8.0, false, "a distance in 1.5..=8 target widths")?
+                }
                 "period" => p.period = parse_u32(k, v, 4, 100_000, "frames in 4..=100000")?,
                 "seed" => {
                     p.seed = v.trim().parse().map_err(|_| PerturbError::Value {
@@ -247,6 +256,9 @@ impl fmt::Display for Perturbation {
         }
         if self.gamma != d.gamma {
             items.push(format!("gamma={}", self.gamma));
+        }
+        if self.lookalike != d.lookalike {
+            items.push(format!("lookalike={}", self.lookalike));
         }
         if self.period != d.period {
             items.push(format!("period={}", self.period));
@@ -421,6 +433,90 @@ impl SequencePerturbation {
             }
         }
         Ok((img, ow, oh))
+    }
+}
+
+/// A patch of a frame: the look-alike's appearance.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Patch {
+    rgb: Vec<u8>,
+    width: usize,
+    height: usize,
+}
+
+impl SequencePerturbation {
+    /// Whether a look-alike is pasted ([`Self::cut_patch`], [`Self::paste_lookalike`]).
+    pub fn has_lookalike(&self) -> bool {
+        self.p.lookalike > 0.0
+    }
+
+    /// The pixels of `b` in a packed RGB `width × height` frame (clipped to the frame;
+    /// `None` when nothing of it is inside).
+    pub fn cut_patch(&self, rgb: &[u8], width: usize, height: usize, b: BBox) -> Option<Patch> {
+        let x0 = f64::from(b.x).round().max(0.0) as usize;
+        let y0 = f64::from(b.y).round().max(0.0) as usize;
+        let x1 = (f64::from(b.x + b.w).round().max(0.0) as usize).min(width);
+        let y1 = (f64::from(b.y + b.h).round().max(0.0) as usize).min(height);
+        if x1 <= x0 || y1 <= y0 || rgb.len() != width * height * 3 {
+            return None;
+        }
+        let mut out = Vec::with_capacity((x1 - x0) * (y1 - y0) * 3);
+        for y in y0..y1 {
+            out.extend_from_slice(&rgb[(y * width + x0) * 3..(y * width + x1) * 3]);
+        }
+        Some(Patch {
+            rgb: out,
+            width: x1 - x0,
+            height: y1 - y0,
+        })
+    }
+
+    /// Where the look-alike of a target at `b` goes: `lookalike` target widths to its right,
+    /// or to its left when the right would leave the frame; `None` when neither fits.
+    pub fn lookalike_box(&self, width: usize, b: BBox) -> Option<BBox> {
+        let d = self.p.lookalike * b.w;
+        [b.x + d, b.x - d]
+            .into_iter()
+            .find(|&x| x >= 0.0 && x + b.w <= width as f32)
+            .map(|x| BBox::new(x, b.y, b.w, b.h))
+    }
+
+    /// Pastes `patch`, resized (nearest) to the target's current box `b`, at
+    /// [`Self::lookalike_box`] in the packed RGB frame; returns where (the truth is unchanged:
+    /// the look-alike is not the target).
+    pub fn paste_lookalike(
+        &self,
+        rgb: &mut [u8],
+        width: usize,
+        height: usize,
+        b: BBox,
+        patch: &Patch,
+    ) -> Option<BBox> {
+        if !self.has_lookalike() || rgb.len() != width * height * 3 {
+            return None;
+        }
+        let at = self.lookalike_box(width, b)?;
+        let x0 = f64::from(at.x).round() as usize;
+        let y0 = f64::from(at.y).round().max(0.0) as usize;
+        let pw = (f64::from(at.w).round() as usize).max(1);
+        let ph = (f64::from(at.h).round() as usize).max(1);
+        for y in 0..ph {
+            let fy = y0 + y;
+            if fy >= height {
+                break;
+            }
+            let sy = (y * patch.height / ph).min(patch.height - 1);
+            for x in 0..pw {
+                let fx = x0 + x;
+                if fx >= width {
+                    break;
+                }
+                let sx = (x * patch.width / pw).min(patch.width - 1);
+                let (d, o) = ((fy * width + fx) * 3, (sy * patch.width + sx) * 3);
+                rgb[d..d + 3].copy_from_slice(&patch.rgb[o..o + 3]);
+            }
+        }
+        Some(at)
     }
 }
 
@@ -702,6 +798,41 @@ mod tests {
     }
 
     #[test]
+    fn the_lookalike_is_the_initial_target_beside_the_current_one() {
+        let (w, h) = (200, 100);
+        let sp = Perturbation::parse("lookalike=2")
+            .unwrap()
+            .for_sequence("l");
+        assert!(sp.has_lookalike());
+        let f0 = frame_with_box(w, h, (20, 30, 10, 20));
+        let patch = sp
+            .cut_patch(&f0, w, h, BBox::new(20.0, 30.0, 10.0, 20.0))
+            .unwrap();
+        // Later the target is at (100, 40), 20x40: the copy goes 2 widths (40 px) right, at
+        // that size; the truth stays on the target.
+        let mut f = vec![40u8; w * h * 3];
+        let b = BBox::new(100.0, 40.0, 20.0, 40.0);
+        let at = sp.paste_lookalike(&mut f, w, h, b, &patch).unwrap();
+        assert_eq!(at, BBox::new(140.0, 40.0, 20.0, 40.0));
+        assert_eq!(bright_box(&f, w, h), Some((140.0, 40.0, 20.0, 40.0)));
+        // Near the right edge it goes to the left.
+        let b = BBox::new(170.0, 10.0, 20.0, 20.0);
+        assert_eq!(
+            sp.lookalike_box(w, b),
+            Some(BBox::new(130.0, 10.0, 20.0, 20.0))
+        );
+        // No look-alike asked for: nothing pasted.
+        let none = Perturbation::parse("blur=1").unwrap().for_sequence("l");
+        let mut g = vec![40u8; w * h * 3];
+        assert_eq!(none.paste_lookalike(&mut g, w, h, b, &patch), None);
+        assert!(g.iter().all(|&v| v == 40));
+        assert_eq!(
+            sp.cut_patch(&f0, w, h, BBox::new(-50.0, 0.0, 10.0, 10.0)),
+            None
+        );
+    }
+
+    #[test]
     fn specifications_parse_print_and_fail_clearly() {
         let p = Perturbation::parse("blur=2, shake=8 ,seed=5,tiny=0.5").unwrap();
         assert_eq!(p.to_string(), "tiny=0.5,shake=8,blur=2,seed=5");
@@ -721,6 +852,7 @@ mod tests {
             ("zoom=0.5", "1..=3"),
             ("period=1", "4..=100000"),
             ("seed=-1", "unsigned"),
+            ("lookalike=1", "1.5..=8"),
         ] {
             let e = Perturbation::parse(bad).unwrap_err().to_string();
             assert!(e.contains(want), "{bad:?}: {e}");

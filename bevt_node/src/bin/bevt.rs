@@ -115,6 +115,7 @@ enum Cmd {
         /// Transform every frame and its ground truth alike, deterministically:
         /// `key=value,...` with tiny=F (downscale, 0.1..=1), zoom=Z, aspect=A (1..=3),
         /// shake=PX (0..=64), blur=SIGMA (0..=8), light=G (1..=4), gamma=G (1..=3),
+        /// lookalike=K (a copy of the initial target K widths beside it, 1.5..=8),
         /// period=FRAMES (default 40), seed=N. E.g. `--perturb shake=8,seed=1`.
         #[arg(long, value_name = "SPEC")]
         perturb: Option<String>,

@@ -225,14 +225,28 @@ fn perturb_sequence(
         })
         .collect::<Result<Vec<_>, _>>()
         .map_err(|e| format!("--perturb: {e}"))?;
+    // The look-alike: the first annotated frame's target, pasted beside the target.
+    let boxes = truth.clone();
+    let template = std::sync::Mutex::new(None);
     let frames = decode_ahead_with(seq.frames, move |t, img| {
         let (iw, ih) = (img.width() as usize, img.height() as usize);
         if (iw, ih) != (w, h) {
             return Err(format!("frame is {iw}x{ih}, the sequence's first {w}x{h}"));
         }
-        let (rgb, ow, oh) = sp
+        let (mut rgb, ow, oh) = sp
             .apply_frame(t, img.into_raw(), w, h)
             .map_err(|e| format!("--perturb: {e}"))?;
+        if let (true, Some(Some(b))) = (sp.has_lookalike(), boxes.get(t)) {
+            let mut template = template
+                .lock()
+                .map_err(|_| "--perturb: look-alike state poisoned".to_string())?;
+            if template.is_none() {
+                *template = sp.cut_patch(&rgb, ow, oh, *b);
+            }
+            if let Some(patch) = template.as_ref() {
+                sp.paste_lookalike(&mut rgb, ow, oh, *b, patch);
+            }
+        }
         RgbFrame::from_raw(ow as u32, oh as u32, rgb)
             .ok_or_else(|| "--perturb: perturbed frame has the wrong size".to_string())
     });
