@@ -195,19 +195,19 @@ pub fn run_loaded(
     run_perturbed(name, loaded, None, tracker, on_frame)
 }
 
+/// A sequence under `--perturb`: the moved truth and the transformed frames.
+struct Perturbed<I> {
+    truth: Vec<Option<BBox>>,
+    frames: I,
+}
+
 /// Every frame `i` of `seq` and its truth through `sp` (`bevt eval --perturb`): the truth
 /// is moved with the frame, sized from the first frame's header; each decoded frame must
 /// have that size.
 fn perturb_sequence(
     seq: Sequence,
     sp: SequencePerturbation,
-) -> Result<
-    (
-        Vec<Option<BBox>>,
-        impl Iterator<Item = Result<RgbFrame, String>>,
-    ),
-    String,
-> {
+) -> Result<Perturbed<impl Iterator<Item = Result<RgbFrame, String>>>, String> {
     let first = seq
         .frames
         .first()
@@ -250,7 +250,7 @@ fn perturb_sequence(
         RgbFrame::from_raw(ow as u32, oh as u32, rgb)
             .ok_or_else(|| "--perturb: perturbed frame has the wrong size".to_string())
     });
-    Ok((truth, frames))
+    Ok(Perturbed { truth, frames })
 }
 
 /// [`run_loaded`] with every frame and its ground truth transformed by `perturb` (the
@@ -315,7 +315,7 @@ pub fn run_perturbed(
     let name = seq.name.clone();
     let original = seq.truth.clone();
     let sp = p.for_sequence(&name);
-    let (truth, frames) = match perturb_sequence(seq, sp) {
+    let Perturbed { truth, frames } = match perturb_sequence(seq, sp) {
         Ok(x) => x,
         Err(e) => return failed(name, original, e),
     };
