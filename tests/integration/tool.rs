@@ -245,7 +245,10 @@ fn perturbed_evaluation_moves_the_truth_with_the_frames() {
     let r = eval(&o).unwrap();
     assert_eq!(r.exit_code(), EXIT_SEQUENCE_FAILED);
     let e = r.summary.sequences[0].error.as_deref().unwrap();
-    assert!(e.contains("init on frame 1") && e.contains("smaller than the minimum"), "{e}");
+    assert!(
+        e.contains("init on frame 1") && e.contains("smaller than the minimum"),
+        "{e}"
+    );
 }
 
 /// Writes a `summary.json` as `bevt eval` does, with the given (name, auc, p20) rows
