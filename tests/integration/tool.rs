@@ -70,6 +70,7 @@ fn options(root: &Path, out: &Path, sequences: &[&str]) -> EvalOptions {
         compare: Vec::new(),
         name: "BEVT-rs".into(),
         progress: false,
+        perturb: None,
     }
 }
 
@@ -186,4 +187,240 @@ fn failures_are_isolated_reported_and_partial_results_kept() {
     let _ = std::fs::remove_dir_all(&root);
     let _ = std::fs::remove_dir_all(&out);
     let _ = std::fs::remove_dir_all(&first);
+}
+
+/// `bevt eval --perturb`: frames and truth move together, so a tracker that follows the
+/// frames scores as well as on the original, the result's initial box is the transformed
+/// one, the summary records the perturbation, and two runs are identical.
+#[test]
+fn perturbed_evaluation_moves_the_truth_with_the_frames() {
+    use bevt_core::eval::perturb::Perturbation;
+    let root = temp_dir("ds_perturb");
+    write_dataset(&root);
+    let anno = std::fs::read_to_string(root.join("anno/good.txt")).unwrap();
+    let a0 = parse_annotation(&anno, Path::new("a")).unwrap()[0].unwrap();
+    // tiny=0.5: the 240x180 frames become 120x90 and every box is halved. Were the truth
+    // left as it was, the centre error would be ~75 px on every frame (P@20 0).
+    let out = temp_dir("out_tiny");
+    let mut o = options(&root, &out, &["good"]);
+    o.perturb = Some(Perturbation::parse("tiny=0.5").unwrap());
+    let r = eval(&o).unwrap();
+    assert_eq!(r.exit_code(), 0);
+    assert_eq!(r.summary.perturb.as_deref(), Some("tiny=0.5"));
+    assert!(
+        r.summary.sequences[0].precision_20 > 0.99,
+        "{:?}",
+        r.summary.sequences[0]
+    );
+    let res = std::fs::read_to_string(out.join("good.txt")).unwrap();
+    let g0 = parse_annotation(&res, Path::new("g")).unwrap()[0].unwrap();
+    assert_eq!(
+        (g0.x, g0.y, g0.w, g0.h),
+        (a0.x * 0.5, a0.y * 0.5, a0.w * 0.5, a0.h * 0.5)
+    );
+    let json = std::fs::read_to_string(out.join("summary.json")).unwrap();
+    assert!(json.contains("\"perturb\": \"tiny=0.5\""), "{json}");
+
+    // A strong shake: still tracked (the truth shakes with the frame), and repeatable.
+    let spec = Perturbation::parse("shake=10,seed=4").unwrap();
+    let mut outs = Vec::new();
+    for k in 0..2 {
+        let out = temp_dir(&format!("out_shake{k}"));
+        let mut o = options(&root, &out, &["good"]);
+        o.perturb = Some(spec);
+        let r = eval(&o).unwrap();
+        assert!(
+            r.summary.sequences[0].precision_20 > 0.99,
+            "{:?}",
+            r.summary.sequences[0]
+        );
+        outs.push(std::fs::read_to_string(out.join("good.txt")).unwrap());
+    }
+    assert_eq!(outs[0], outs[1]);
+    // tiny=0.1 leaves a 4x3 px target, which the tracker refuses: the sequence fails with
+    // the reason, nothing panics.
+    let out = temp_dir("out_tiny_bad");
+    let mut o = options(&root, &out, &["good"]);
+    o.perturb = Some(Perturbation::parse("tiny=0.1").unwrap());
+    let r = eval(&o).unwrap();
+    assert_eq!(r.exit_code(), EXIT_SEQUENCE_FAILED);
+    let e = r.summary.sequences[0].error.as_deref().unwrap();
+    assert!(
+        e.contains("init on frame 1") && e.contains("smaller than the minimum"),
+        "{e}"
+    );
+}
+
+/// Writes a `summary.json` as `bevt eval` does, with the given (name, auc, p20) rows
+/// (`None` = a failed sequence).
+fn write_summary_json(dir: &Path, rows: &[(&str, Option<(f64, f64)>)], perturb: Option<&str>) {
+    std::fs::create_dir_all(dir).unwrap();
+    let seqs: Vec<serde_json::Value> = rows
+        .iter()
+        .map(|(n, s)| match s {
+            Some((auc, p)) => serde_json::json!({"name": n, "status": "ok", "auc": auc,
+                "precision_20": p, "success_50": auc / 2.0, "fps": 10.0}),
+            None => serde_json::json!({"name": n, "status": "failed", "error": "frame 5: broken",
+                "auc": null, "precision_20": null, "success_50": null}),
+        })
+        .collect();
+    let mut s = serde_json::json!({"tracker": "x", "sequences": seqs});
+    if let Some(p) = perturb {
+        s["perturb"] = serde_json::json!(p);
+    }
+    std::fs::write(dir.join("summary.json"), s.to_string()).unwrap();
+}
+
+#[test]
+fn select_chooses_on_the_other_sequences_and_refuses_bad_folders() {
+    use bevt_node::tool::select::{render, select, Criterion, SelectOptions};
+    let root = temp_dir("select");
+    // steady: 0.5 everywhere; spiky: best on s0 only; mild: a little better on s1, s2.
+    let steady = root.join("steady");
+    let spiky = root.join("spiky");
+    let mild = root.join("mild");
+    write_summary_json(
+        &steady,
+        &[
+            ("s0", Some((0.5, 0.9))),
+            ("s1", Some((0.5, 0.9))),
+            ("s2", Some((0.5, 0.9))),
+        ],
+        None,
+    );
+    write_summary_json(
+        &spiky,
+        &[
+            ("s0", Some((0.9, 1.0))),
+            ("s1", Some((0.3, 0.6))),
+            ("s2", Some((0.3, 0.6))),
+        ],
+        None,
+    );
+    write_summary_json(
+        &mild,
+        &[
+            ("s0", Some((0.2, 0.4))),
+            ("s1", Some((0.6, 1.0))),
+            ("s2", Some((0.6, 1.0))),
+        ],
+        None,
+    );
+    let opts = |v: &[(&str, &Path)]| SelectOptions {
+        variants: v
+            .iter()
+            .map(|(n, d)| (n.to_string(), d.to_path_buf()))
+            .collect(),
+        criterion: Criterion::Auc,
+        sequences: Vec::new(),
+    };
+    let r = select(&opts(&[
+        ("steady", &steady),
+        ("spiky", &spiky),
+        ("mild", &mild),
+    ]))
+    .unwrap();
+    // Hold out s0: mild (0.6 on s1, s2) is chosen and scores 0.2; s1 and s2: spiky (0.6),
+    // scoring 0.3. LOSO mean 0.8 / 3 while steady and spiky tie at 0.5 on the full set.
+    let chosen: Vec<usize> = r.loso.folds.iter().map(|f| f.chosen).collect();
+    assert_eq!(chosen, [2, 1, 1]);
+    assert!((r.loso.loso_mean - 0.8 / 3.0).abs() < 1e-12);
+    assert!((r.loso_mean_of(Criterion::P20) - (0.4 + 0.6 + 0.6) / 3.0).abs() < 1e-12);
+    let text = render(&r);
+    assert!(
+        text.contains("| s0 | mild | 0.600 | 0.200 | 0.400 | 0.100 | 0.900 |"),
+        "{text}"
+    );
+    assert!(
+        text.contains("| **LOSO mean** | | | **0.267** | **0.533**"),
+        "{text}"
+    );
+    assert!(
+        text.contains("| steady (full-set choice) | 0.500 | 0.900 | 0.250 | 0 of 3 |"),
+        "{text}"
+    );
+    assert!(text.contains("optimism +0.233"), "{text}");
+    // By P@20 the folds choose differently: holding out s1, steady (0.9 on s0, s2) beats
+    // spiky (0.8) and mild (0.7).
+    let mut o = opts(&[("steady", &steady), ("spiky", &spiky), ("mild", &mild)]);
+    o.criterion = Criterion::P20;
+    let r = select(&o).unwrap();
+    assert_eq!(r.loso.folds[0].chosen, 2);
+    assert_eq!(r.loso.folds[1].chosen, 0);
+
+    // Bad folders: each a clear error naming the variant.
+    let err = |v: &[(&str, &Path)], seqs: &[&str]| {
+        let mut o = opts(v);
+        o.sequences = seqs.iter().map(|s| s.to_string()).collect();
+        format!("{:#}", select(&o).unwrap_err())
+    };
+    let empty = root.join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let e = err(&[("steady", &steady), ("none", &empty)], &[]);
+    assert!(
+        e.contains("none: cannot read") && e.contains("summary.json"),
+        "{e}"
+    );
+    let junk = root.join("junk");
+    std::fs::create_dir_all(&junk).unwrap();
+    std::fs::write(junk.join("summary.json"), "{\"sequences\": 3}").unwrap();
+    let e = err(&[("junk", &junk)], &[]);
+    assert!(
+        e.contains("junk:") && e.contains("not a `bevt eval` summary"),
+        "{e}"
+    );
+    let failed = root.join("failed");
+    write_summary_json(
+        &failed,
+        &[
+            ("s0", Some((0.5, 0.9))),
+            ("s1", None),
+            ("s2", Some((0.5, 0.9))),
+        ],
+        None,
+    );
+    let e = err(&[("steady", &steady), ("failed", &failed)], &[]);
+    assert!(
+        e.contains("failed: sequence s1 failed in that run (frame 5: broken)"),
+        "{e}"
+    );
+    // ... which --sequences can leave out.
+    let mut o = opts(&[("steady", &steady), ("failed", &failed)]);
+    o.sequences = vec!["s0".into(), "s2".into()];
+    assert_eq!(select(&o).unwrap().loso.folds.len(), 2);
+    let more = root.join("more");
+    write_summary_json(
+        &more,
+        &[
+            ("s0", Some((0.5, 0.9))),
+            ("s1", Some((0.5, 0.9))),
+            ("s2", Some((0.5, 0.9))),
+            ("s3", Some((0.5, 0.9))),
+        ],
+        None,
+    );
+    let e = err(&[("steady", &steady), ("more", &more)], &[]);
+    assert!(e.contains("more has sequences steady has not (s3)"), "{e}");
+    let e = err(&[("more", &more), ("steady", &steady)], &[]);
+    assert!(e.contains("steady has no sequence \"s3\""), "{e}");
+    let e = err(&[("steady", &steady)], &["s0"]);
+    assert!(e.contains("at least 2 sequences"), "{e}");
+    let e = err(&[("steady", &steady), ("steady", &spiky)], &[]);
+    assert!(e.contains("variant \"steady\" is given twice"), "{e}");
+    let shaken = root.join("shaken");
+    write_summary_json(
+        &shaken,
+        &[
+            ("s0", Some((0.5, 0.9))),
+            ("s1", Some((0.5, 0.9))),
+            ("s2", Some((0.5, 0.9))),
+        ],
+        Some("shake=8"),
+    );
+    let e = err(&[("steady", &steady), ("shaken", &shaken)], &[]);
+    assert!(
+        e.contains("shaken was run with perturbation shake=8 but steady with none"),
+        "{e}"
+    );
+    assert!(Criterion::parse("iou").is_err());
 }

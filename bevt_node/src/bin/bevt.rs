@@ -2,11 +2,13 @@
 //!
 //! - `bevt demo`: track a synthetic sequence generated in memory (no files needed).
 //! - `bevt eval`: one-pass evaluation on a UAV123-style dataset, with plots and comparisons.
+//! - `bevt select`: leave-one-sequence-out selection over finished `bevt eval` folders.
 //! - `bevt track`: track through a folder of frames from an initial box.
 //! - `bevt replay`: replay a recorded camera topic (rosbag2) through the node logic, MCAP out.
 
 use anyhow::{bail, Context, Result};
 use bevt_core::eval::metrics::score_sequence;
+use bevt_core::eval::perturb::Perturbation;
 use bevt_core::eval::synth::SynthParams;
 use bevt_core::{BBox, BevtTracker, Frame, PixelFormat, Tracker};
 use bevt_node::node::node_params::launch_from_args;
@@ -18,6 +20,7 @@ use bevt_node::tool::replay::{
     ReplayOptions, ReplaySummary,
 };
 use bevt_node::tool::runner::{decode_ahead, track_feed};
+use bevt_node::tool::select::{render, select, Criterion, SelectOptions};
 use clap::{Args, Parser, Subcommand};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -109,6 +112,31 @@ enum Cmd {
         /// Name of this run in tables and plots.
         #[arg(long, default_value = "BEVT-rs")]
         name: String,
+        /// Transform every frame and its ground truth alike, deterministically:
+        /// `key=value,...` with tiny=F (downscale, 0.1..=1), zoom=Z, aspect=A (1..=3),
+        /// shake=PX (0..=64), blur=SIGMA (0..=8), light=G (1..=4), gamma=G (1..=3),
+        /// lookalike=K (a copy of the initial target K widths beside it, 1.5..=8),
+        /// period=FRAMES (default 40), seed=N. E.g. `--perturb shake=8,seed=1`.
+        #[arg(long, value_name = "SPEC")]
+        perturb: Option<String>,
+    },
+    /// Leave-one-sequence-out selection over finished `bevt eval --out` folders.
+    ///
+    /// For each sequence held out, the variant with the best mean criterion over the other
+    /// sequences is chosen and scored on it. Prints every fold, the pooled LOSO mean beside
+    /// each variant's full-set mean, and the per-sequence scores (Markdown). List the
+    /// incumbent first: ties go to the earlier variant.
+    Select {
+        /// Candidates: NAME=DIR, DIR a `bevt eval --out` folder (its summary.json is read).
+        #[arg(value_name = "NAME=DIR", required = true)]
+        variants: Vec<String>,
+        /// What to maximise: auc, p20 or sr50.
+        #[arg(long, default_value = "auc")]
+        criterion: String,
+        /// Comma-separated sequences to use (default: all of the first variant's, which
+        /// every variant must have).
+        #[arg(long, value_name = "NAMES", value_delimiter = ',')]
+        sequences: Vec<String>,
     },
     /// Track a target through a folder of frames from an initial box, one box per frame.
     ///
@@ -279,7 +307,11 @@ fn eval(
     plots: bool,
     compare: &[String],
     name: &str,
+    perturb: Option<&str>,
 ) -> Result<ExitCode> {
+    let perturb = perturb
+        .map(|p| Perturbation::parse(p).map_err(|e| anyhow::anyhow!("--perturb {p:?}: {e}")))
+        .transpose()?;
     let opts = EvalOptions {
         tracker: spec_of(cfg)?,
         dataset: dataset.to_path_buf(),
@@ -292,6 +324,7 @@ fn eval(
             .collect::<Result<_>>()?,
         name: name.to_string(),
         progress: true,
+        perturb,
     };
     Ok(ExitCode::from(
         bevt_node::tool::eval::eval(&opts)?.exit_code(),
@@ -371,7 +404,33 @@ fn run(cli: Cli) -> Result<ExitCode> {
             plots,
             compare,
             name,
-        } => eval(cfg, dataset, out, sequences, *plots, compare, name),
+            perturb,
+        } => eval(
+            cfg,
+            dataset,
+            out,
+            sequences,
+            *plots,
+            compare,
+            name,
+            perturb.as_deref(),
+        ),
+        Cmd::Select {
+            variants,
+            criterion,
+            sequences,
+        } => {
+            let opts = SelectOptions {
+                variants: variants
+                    .iter()
+                    .map(|v| parse_compare(v).map_err(anyhow::Error::msg))
+                    .collect::<Result<_>>()?,
+                criterion: Criterion::parse(criterion).map_err(anyhow::Error::msg)?,
+                sequences: sequences.clone(),
+            };
+            print!("{}", render(&select(&opts)?));
+            Ok(ExitCode::SUCCESS)
+        }
         Cmd::Track {
             cfg,
             images,

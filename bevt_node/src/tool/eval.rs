@@ -9,8 +9,9 @@ use crate::tool::plots::{plot_curves, Curve};
 use crate::tool::report::{
     build_summary, console_table, summarize_run, write_result_file, write_summary, Summary,
 };
-use crate::tool::runner::run_loaded;
+use crate::tool::runner::run_perturbed;
 use anyhow::{bail, Context, Result};
+use bevt_core::eval::perturb::Perturbation;
 use bevt_core::{BevtTracker, TrackerSpec};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::collections::BTreeMap;
@@ -39,6 +40,8 @@ pub struct EvalOptions {
     pub name: String,
     /// Draw the progress bars on standard error (hidden when false).
     pub progress: bool,
+    /// Transform every frame and its ground truth (`--perturb`; `None`: the footage as is).
+    pub perturb: Option<Perturbation>,
 }
 
 /// Parses one `--compare NAME=DIR`.
@@ -146,18 +149,28 @@ pub fn eval(opts: &EvalOptions) -> Result<EvalOutcome> {
         ds.layout,
         threads
     );
+    let perturb = opts.perturb.map(|p| p.to_string());
+    if let Some(p) = &perturb {
+        println!("perturbation: {p} (frames and ground truth transformed alike)");
+    }
     for entry in &ds.sequences {
         let loaded = entry.load();
         let frames = loaded.as_ref().map_or(0, |s| s.frames.len() as u64);
         let bar = sequence_bar(&entry.name, frames, opts.progress);
         let mut tracker = BevtTracker::new(opts.tracker.clone());
         let run = pool.install(|| {
-            run_loaded(&entry.name, loaded, &mut tracker, |_, o| {
-                bar.inc(1);
-                if let Some(o) = o {
-                    bar.set_message(format!("consensus {:.2}", o.consensus));
-                }
-            })
+            run_perturbed(
+                &entry.name,
+                loaded,
+                opts.perturb.as_ref(),
+                &mut tracker,
+                |_, o| {
+                    bar.inc(1);
+                    if let Some(o) = o {
+                        bar.set_message(format!("consensus {:.2}", o.consensus));
+                    }
+                },
+            )
         });
         progress.push(SequenceProgress {
             name: entry.name.clone(),
@@ -183,7 +196,7 @@ pub fn eval(opts: &EvalOptions) -> Result<EvalOutcome> {
         truths.insert(run.name.clone(), run.truth.clone());
         summaries.push(s);
         // Keep a summary on disk after every sequence: nothing computed is lost.
-        let partial = build_summary(
+        let mut partial = build_summary(
             &opts.name,
             &ds,
             &summaries,
@@ -191,10 +204,11 @@ pub fn eval(opts: &EvalOptions) -> Result<EvalOutcome> {
             &opts.compare,
             config_json.clone(),
         );
+        partial.perturb.clone_from(&perturb);
         write_summary(out, &partial)
             .with_context(|| format!("cannot write {}/summary.json", out.display()))?;
     }
-    let summary = build_summary(
+    let mut summary = build_summary(
         &opts.name,
         &ds,
         &summaries,
@@ -202,6 +216,7 @@ pub fn eval(opts: &EvalOptions) -> Result<EvalOutcome> {
         &opts.compare,
         config_json,
     );
+    summary.perturb = perturb;
     write_summary(out, &summary)
         .with_context(|| format!("cannot write {}/summary.json", out.display()))?;
     println!("\n{}", console_table(&summary));

@@ -145,6 +145,9 @@ pub struct Summary {
     pub attributes: Vec<AttributeRow>,
     /// The configuration used.
     pub config: serde_json::Value,
+    /// The `--perturb` applied to every frame and its truth (absent: none).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub perturb: Option<String>,
 }
 
 /// Minimum, 5th, 50th and 95th percentile (nearest rank) of `v`; NaN when empty.
@@ -322,6 +325,7 @@ pub fn build_summary(
         compare,
         attributes,
         config,
+        perturb: None,
     }
 }
 

@@ -5,6 +5,7 @@
 //! every box computed before that is kept.
 
 use crate::tool::dataset::{DatasetError, Sequence, SequenceEntry};
+use bevt_core::eval::perturb::{Perturbation, SequencePerturbation};
 use bevt_core::{BBox, Frame, PixelFormat, TrackOutput, Tracker};
 use std::path::PathBuf;
 use std::sync::mpsc;
@@ -53,14 +54,26 @@ impl TrackRun {
 /// # Errors
 /// Each item is `Err(reason)` for a frame that cannot be read or decoded.
 pub fn decode_ahead(paths: Vec<PathBuf>) -> impl Iterator<Item = Result<RgbFrame, String>> {
+    decode_ahead_with(paths, |_, img| Ok(img))
+}
+
+/// [`decode_ahead`], passing frame `i` through `map(i, frame)` on the decoding thread.
+///
+/// # Errors
+/// Each item is `Err(reason)` for a frame that cannot be read, decoded or mapped.
+pub fn decode_ahead_with(
+    paths: Vec<PathBuf>,
+    map: impl Fn(usize, RgbFrame) -> Result<RgbFrame, String> + Send + 'static,
+) -> impl Iterator<Item = Result<RgbFrame, String>> {
     let (tx, rx) = mpsc::sync_channel(PREFETCH_FRAMES);
     let spawned = std::thread::Builder::new()
         .name("bevt-decode".into())
         .spawn(move || {
-            for p in paths {
+            for (i, p) in paths.into_iter().enumerate() {
                 let r = image::open(&p)
                     .map(|i| i.to_rgb8())
-                    .map_err(|e| format!("{}: {e}", p.display()));
+                    .map_err(|e| format!("{}: {e}", p.display()))
+                    .and_then(|img| map(i, img).map_err(|e| format!("{}: {e}", p.display())));
                 if tx.send(r).is_err() {
                     break;
                 }
@@ -179,6 +192,84 @@ pub fn run_loaded(
     tracker: &mut dyn Tracker,
     on_frame: impl FnMut(usize, Option<&TrackOutput>),
 ) -> SequenceRun {
+    run_perturbed(name, loaded, None, tracker, on_frame)
+}
+
+/// A sequence under `--perturb`: the moved truth and the transformed frames.
+struct Perturbed<I> {
+    truth: Vec<Option<BBox>>,
+    frames: I,
+}
+
+/// Every frame `i` of `seq` and its truth through `sp` (`bevt eval --perturb`): the truth
+/// is moved with the frame, sized from the first frame's header; each decoded frame must
+/// have that size.
+fn perturb_sequence(
+    seq: Sequence,
+    sp: SequencePerturbation,
+) -> Result<Perturbed<impl Iterator<Item = Result<RgbFrame, String>>>, String> {
+    let first = seq
+        .frames
+        .first()
+        .ok_or_else(|| "no frames to perturb".to_string())?;
+    let (w, h) = image::image_dimensions(first)
+        .map(|(w, h)| (w as usize, h as usize))
+        .map_err(|e| format!("{}: {e}", first.display()))?;
+    let truth = seq
+        .truth
+        .iter()
+        .enumerate()
+        .map(|(t, b)| match b {
+            Some(b) => sp.apply_box(t, w, h, *b),
+            None => Ok(None),
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| format!("--perturb: {e}"))?;
+    // The look-alike: the first annotated frame's target, pasted beside the target.
+    let boxes = truth.clone();
+    let template = std::sync::Mutex::new(None);
+    let frames = decode_ahead_with(seq.frames, move |t, img| {
+        let (iw, ih) = (img.width() as usize, img.height() as usize);
+        if (iw, ih) != (w, h) {
+            return Err(format!("frame is {iw}x{ih}, the sequence's first {w}x{h}"));
+        }
+        let (mut rgb, ow, oh) = sp
+            .apply_frame(t, img.into_raw(), w, h)
+            .map_err(|e| format!("--perturb: {e}"))?;
+        if let (true, Some(Some(b))) = (sp.has_lookalike(), boxes.get(t)) {
+            let mut template = template
+                .lock()
+                .map_err(|_| "--perturb: look-alike state poisoned".to_string())?;
+            if template.is_none() {
+                *template = sp.cut_patch(&rgb, ow, oh, *b);
+            }
+            if let Some(patch) = template.as_ref() {
+                sp.paste_lookalike(&mut rgb, ow, oh, *b, patch);
+            }
+        }
+        RgbFrame::from_raw(ow as u32, oh as u32, rgb)
+            .ok_or_else(|| "--perturb: perturbed frame has the wrong size".to_string())
+    });
+    Ok(Perturbed { truth, frames })
+}
+
+/// [`run_loaded`] with every frame and its ground truth transformed by `perturb` (the
+/// returned truth is the transformed one, so scores compare like with like).
+pub fn run_perturbed(
+    name: &str,
+    loaded: Result<Sequence, DatasetError>,
+    perturb: Option<&Perturbation>,
+    tracker: &mut dyn Tracker,
+    on_frame: impl FnMut(usize, Option<&TrackOutput>),
+) -> SequenceRun {
+    let failed = |name: String, truth: Vec<Option<BBox>>, e: String| SequenceRun {
+        name,
+        truth,
+        run: TrackRun {
+            error: Some(e),
+            ..TrackRun::default()
+        },
+    };
     let seq: Sequence = match loaded {
         Ok(s) => s,
         Err(e) => {
@@ -207,16 +298,36 @@ pub fn run_loaded(
             },
         };
     };
-    let run = track_feed(
-        tracker,
-        decode_ahead(seq.frames),
-        init_index,
-        init,
-        on_frame,
-    );
-    SequenceRun {
-        name: seq.name,
-        truth: seq.truth,
-        run,
-    }
+    let Some(p) = perturb else {
+        let run = track_feed(
+            tracker,
+            decode_ahead(seq.frames),
+            init_index,
+            init,
+            on_frame,
+        );
+        return SequenceRun {
+            name: seq.name,
+            truth: seq.truth,
+            run,
+        };
+    };
+    let name = seq.name.clone();
+    let original = seq.truth.clone();
+    let sp = p.for_sequence(&name);
+    let Perturbed { truth, frames } = match perturb_sequence(seq, sp) {
+        Ok(x) => x,
+        Err(e) => return failed(name, original, e),
+    };
+    // The first annotated frame is unchanged by the time-varying terms, but `tiny` rescales
+    // its box: initialise on the transformed one.
+    let Some(init) = truth.get(init_index).copied().flatten() else {
+        return failed(
+            name,
+            truth,
+            "--perturb moved the initial box off the frame".into(),
+        );
+    };
+    let run = track_feed(tracker, frames, init_index, init, on_frame);
+    SequenceRun { name, truth, run }
 }
