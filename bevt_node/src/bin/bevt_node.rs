@@ -273,26 +273,28 @@ fn run() -> Result<()> {
         .context("cannot install the SIGINT/SIGTERM handler")?;
     // Start-up lines in the node's log format (severity, time, node name), under its
     // `--log-level` like every later line.
-    let info = |text: &str| {
-        console::log(
-            LogLevel::Info,
-            launch.ros.log_level,
-            &launch.ros.node_name,
-            text,
-        )
-    };
-    info(&launch.ros.security.startup_line(launch.ros.domain_id));
+    let (threshold, node_name) = (launch.ros.log_level, launch.ros.node_name.clone());
+    let log = |level: LogLevel, text: &str| console::log(level, threshold, &node_name, text);
+    // An unsecured node says so as a warning; a secured one names its enclave.
+    let security = &launch.ros.security;
+    match security.warning(launch.ros.domain_id) {
+        Some(w) => log(LogLevel::Warn, &w),
+        None => log(LogLevel::Info, &security.startup_line(launch.ros.domain_id)),
+    }
     if launch.demo {
         return demo(launch, stop);
     }
-    info(&format!(
-        "domain {}, namespace {}, interfaces {:?}, services {:?}, camera input {}",
-        launch.ros.domain_id,
-        launch.ros.namespace,
-        launch.ros.networks,
-        launch.ros.service_mapping,
-        launch.ros.image_transport.name()
-    ));
+    log(
+        LogLevel::Info,
+        &format!(
+            "domain {}, namespace {}, interfaces {:?}, services {:?}, camera input {}",
+            launch.ros.domain_id,
+            launch.ros.namespace,
+            launch.ros.networks,
+            launch.ros.service_mapping,
+            launch.ros.image_transport.name()
+        ),
+    );
     let core = NodeCore::new(launch.tracker.clone(), launch.node.clone());
     ros::run(core, &launch.ros, stop, |_| {})?;
     Ok(())
