@@ -27,7 +27,7 @@
 use crate::error::TrackError;
 use crate::geometry::Point2;
 use crate::image::{Frame, Patch, Sampler};
-use crate::redetect::{context_side, Verifier, VerifierHit};
+use crate::redetect::{context_side, Scored, Verifier, VerifierHit};
 use std::path::Path;
 use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 use thiserror::Error;
@@ -152,11 +152,18 @@ struct Planned {
     path: String,
 }
 
-/// The three optimised networks of one (backbone, head) pair.
+/// The optimised networks of one (backbone, head) pair: the backbone at both input sizes,
+/// the whole head, and each of its two branches alone (the classification branch, whose
+/// logits give the scores, and the box regression branch). The branches share no node
+/// after the inputs, so a branch alone computes what the whole head does, bit for bit
+/// (tested): a search that needs only the score, or a box only above a bar, runs the
+/// regression branch only when the score reaches that bar.
 struct Plans {
     template: Planned,
     search: Planned,
     head: Planned,
+    cls: Planned,
+    reg: Planned,
 }
 
 /// Optimised plans by `(verifier_backbone, verifier_head)` as configured (empty: embedded).
@@ -334,11 +341,13 @@ fn load(
 
 /// The networks' runtime.
 enum Backend {
-    /// tract plans: backbone at 127 and at 255, head.
+    /// tract plans: backbone at 127 and at 255, head, and the head's two branches alone.
     Tract {
         template: Box<Net>,
         search: Box<Net>,
         head: Box<Net>,
+        cls: Box<Net>,
+        reg: Box<Net>,
     },
     /// ONNX Runtime sessions (cargo feature `cnn`).
     #[cfg(feature = "cnn")]
@@ -425,20 +434,24 @@ impl NanoVerifier {
         let template = backbone_plan(TEMPLATE_SIDE)?;
         let search = backbone_plan(SEARCH_SIDE)?;
         let (t, x) = (TEMPLATE_CELLS, SEARCH_CELLS);
-        let head = Planned::new(
-            &hd,
-            HEAD_KEY,
-            &hd_name,
-            &[
-                ("input1", &[1, CHANNELS, t, t]),
-                ("input2", &[1, CHANNELS, x, x]),
-            ],
-            &["output1", "output2"],
-        )?;
+        let head_plan = |outputs: &[&str]| {
+            Planned::new(
+                &hd,
+                HEAD_KEY,
+                &hd_name,
+                &[
+                    ("input1", &[1, CHANNELS, t, t]),
+                    ("input2", &[1, CHANNELS, x, x]),
+                ],
+                outputs,
+            )
+        };
         Ok(Plans {
             template,
             search,
-            head,
+            head: head_plan(&["output1", "output2"])?,
+            cls: head_plan(&["output1"])?,
+            reg: head_plan(&["output2"])?,
         })
     }
 
@@ -448,6 +461,8 @@ impl NanoVerifier {
             template: Box::new(Net::new(&plans.template)?),
             search: Box::new(Net::new(&plans.search)?),
             head: Box::new(Net::new(&plans.head)?),
+            cls: Box::new(Net::new(&plans.cls)?),
+            reg: Box::new(Net::new(&plans.reg)?),
         })
     }
 
@@ -482,6 +497,7 @@ impl NanoVerifier {
         v.input = vec![128.0; 3 * SEARCH_SIDE * SEARCH_SIDE];
         v.search = v.run_backbone(SEARCH_SIDE)?;
         v.run_head()?;
+        v.run_head_if(|_| true)?;
         v.template.clear();
         Ok(v)
     }
@@ -540,6 +556,39 @@ impl NanoVerifier {
         self.template = kept_t;
         self.search = kept_s;
         r
+    }
+
+    /// As [`Self::head`], computed by the head's two branches run apart (the classification
+    /// branch, then the regression branch), as [`Verifier::search_above`] does (for tests:
+    /// the two are bit-identical).
+    ///
+    /// # Errors
+    /// [`NanoError::Run`] for wrong lengths, or an output error.
+    pub fn head_by_branches(
+        &mut self,
+        template: &[f32],
+        search: &[f32],
+    ) -> Result<(Vec<f32>, Vec<f32>), NanoError> {
+        // The same length checks and error as the whole head.
+        if template.len() != CHANNELS * TEMPLATE_CELLS * TEMPLATE_CELLS
+            || search.len() != CHANNELS * SEARCH_CELLS * SEARCH_CELLS
+        {
+            return self.head(template, search);
+        }
+        let (kept_t, kept_s) = (
+            std::mem::replace(&mut self.template, template.to_vec()),
+            std::mem::replace(&mut self.search, search.to_vec()),
+        );
+        let r = self.run_head_if(|_| true);
+        self.template = kept_t;
+        self.search = kept_s;
+        let (margins, loc) = r?;
+        let loc = loc.ok_or_else(|| NanoError::Run {
+            key: HEAD_KEY,
+            path: self.backend.paths().1.to_string(),
+            reason: "the regression branch did not run".to_string(),
+        })?;
+        Ok((margins, loc))
     }
 
     /// Samples the square of side `region` at `center` into `self.input` (`out`², RGB).
@@ -609,6 +658,81 @@ impl NanoVerifier {
     }
 }
 
+impl NanoVerifier {
+    /// The head's classification branch on the template and `self.search` (the margins),
+    /// then its regression branch (the box distances) only when `want_box(&margins)`; on
+    /// ONNX Runtime the whole head runs and the distances are always returned.
+    fn run_head_if(
+        &mut self,
+        want_box: impl FnOnce(&[f32]) -> bool,
+    ) -> Result<(Vec<f32>, Option<Vec<f32>>), NanoError> {
+        let (t, x) = (TEMPLATE_CELLS, SEARCH_CELLS);
+        let (cls, reg) = match &mut self.backend {
+            Backend::Tract { cls, reg, .. } => (cls, reg),
+            #[cfg(feature = "cnn")]
+            Backend::Ort(_) => {
+                let (margins, loc) = self.run_head()?;
+                return Ok((margins, Some(loc)));
+            }
+        };
+        let inputs: [(&[usize], &[f32]); 2] = [
+            (&[1, CHANNELS, t, t], &self.template),
+            (&[1, CHANNELS, x, x], &self.search),
+        ];
+        let logits = cls
+            .run(&inputs, &[("output1", &[1, 2, x, x])])?
+            .swap_remove(0);
+        let n = x * x;
+        let margins: Vec<f32> = (0..n).map(|i| logits[n + i] - logits[i]).collect();
+        if !want_box(&margins) {
+            return Ok((margins, None));
+        }
+        let loc = reg
+            .run(&inputs, &[("output2", &[1, 4, x, x])])?
+            .swap_remove(0);
+        Ok((margins, Some(loc)))
+    }
+}
+
+/// The grid point with the largest margin and that margin (`None` for no points).
+fn best_point(margins: &[f32]) -> Option<(usize, f32)> {
+    margins
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(i, &m)| (i, m))
+}
+
+/// The hit of grid point `i` (score `score`, box distances `loc`) of the search crop of
+/// side `side` at `center` of `frame`.
+fn hit_at(
+    frame: &Frame<'_>,
+    center: Point2,
+    side: f32,
+    i: usize,
+    score: f32,
+    loc: &[f32],
+) -> VerifierHit {
+    let n = SEARCH_CELLS * SEARCH_CELLS;
+    let (j, k) = (i / SEARCH_CELLS, i % SEARCH_CELLS);
+    let gx = (k as f32 - 8.0) * STRIDE + GRID_CENTRE;
+    let gy = (j as f32 - 8.0) * STRIDE + GRID_CENTRE;
+    let (l, t, r, b) = (loc[i], loc[n + i], loc[2 * n + i], loc[3 * n + i]);
+    let px = side / SEARCH_SIDE as f32;
+    let fw = frame.width() as f32;
+    let fh = frame.height() as f32;
+    let pos = Point2 {
+        x: (center.x + (gx + 0.5 * (r - l) - GRID_CENTRE) * px).clamp(0.0, fw),
+        y: (center.y + (gy + 0.5 * (b - t) - GRID_CENTRE) * px).clamp(0.0, fh),
+    };
+    VerifierHit {
+        pos,
+        w: ((l + r) * px).max(1.0),
+        h: ((t + b) * px).max(1.0),
+        score,
+    }
+}
+
 /// The head's per-point foreground logit margins `[256]` and box distances `[4·256]`.
 pub type HeadMaps = (Vec<f32>, Vec<f32>);
 
@@ -672,26 +796,29 @@ impl Verifier for NanoVerifier {
         self.crop(frame, center, side, SEARCH_SIDE);
         self.search = self.run_backbone(SEARCH_SIDE)?;
         let (margins, loc) = self.run_head()?;
-        let Some((i, &score)) = margins.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)) else {
+        Ok(best_point(&margins).map(|(i, score)| hit_at(frame, center, side, i, score, &loc)))
+    }
+
+    fn search_above(
+        &mut self,
+        frame: &Frame<'_>,
+        center: Point2,
+        side: f32,
+        bar: f32,
+    ) -> Result<Option<Scored>, TrackError> {
+        if self.template.is_empty() || !(side.is_finite() && side > 0.0) {
+            return Ok(None);
+        }
+        self.crop(frame, center, side, SEARCH_SIDE);
+        self.search = self.run_backbone(SEARCH_SIDE)?;
+        let reaches = |m: &[f32]| best_point(m).is_some_and(|(_, s)| s >= bar);
+        let (margins, loc) = self.run_head_if(reaches)?;
+        let Some((i, score)) = best_point(&margins) else {
             return Ok(None);
         };
-        let n = SEARCH_CELLS * SEARCH_CELLS;
-        let (j, k) = (i / SEARCH_CELLS, i % SEARCH_CELLS);
-        let gx = (k as f32 - 8.0) * STRIDE + GRID_CENTRE;
-        let gy = (j as f32 - 8.0) * STRIDE + GRID_CENTRE;
-        let (l, t, r, b) = (loc[i], loc[n + i], loc[2 * n + i], loc[3 * n + i]);
-        let px = side / SEARCH_SIDE as f32;
-        let fw = frame.width() as f32;
-        let fh = frame.height() as f32;
-        let pos = Point2 {
-            x: (center.x + (gx + 0.5 * (r - l) - GRID_CENTRE) * px).clamp(0.0, fw),
-            y: (center.y + (gy + 0.5 * (b - t) - GRID_CENTRE) * px).clamp(0.0, fh),
-        };
-        Ok(Some(VerifierHit {
-            pos,
-            w: ((l + r) * px).max(1.0),
-            h: ((t + b) * px).max(1.0),
-            score,
+        Ok(Some(match loc {
+            Some(loc) if score >= bar => Scored::Hit(hit_at(frame, center, side, i, score, &loc)),
+            _ => Scored::Below(score),
         }))
     }
 }
