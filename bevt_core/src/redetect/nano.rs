@@ -16,8 +16,12 @@
 //! The models: empty `redetection.verifier_backbone` / `verifier_head` mean the NanoTrack v2
 //! files embedded in this crate (`models/nanotrack/`, see its README for origin, licence and
 //! sha256), so the default needs no file at run time; a path loads that file instead. Each
-//! network is optimised once per input size (backbone: 127 and 255; head: one plan) and run
-//! single-threaded.
+//! network is optimised once per input size (backbone: 127 and 255) and run single-threaded.
+//! The head is optimised as its two branches, each alone: the classification branch (the
+//! scores) and the box regression branch. They share no node after the inputs, so together
+//! they compute what the whole head does, bit for bit (tested); a search that needs only the
+//! score ([`Verifier::search_above`]: the drift check, a lost-state window below the bar)
+//! skips the regression branch, about half the head.
 //!
 //! With the cargo feature `cnn`, `redetection.verifier: nanotrack_ort` runs the same models
 //! (same crops, scoring and acceptance) on ONNX Runtime instead (`NanoVerifier::new_ort`),
@@ -152,16 +156,11 @@ struct Planned {
     path: String,
 }
 
-/// The optimised networks of one (backbone, head) pair: the backbone at both input sizes,
-/// the whole head, and each of its two branches alone (the classification branch, whose
-/// logits give the scores, and the box regression branch). The branches share no node
-/// after the inputs, so a branch alone computes what the whole head does, bit for bit
-/// (tested): a search that needs only the score, or a box only above a bar, runs the
-/// regression branch only when the score reaches that bar.
+/// The optimised networks of one (backbone, head) pair: the backbone at both input sizes
+/// and the head's two branches (see the module doc).
 struct Plans {
     template: Planned,
     search: Planned,
-    head: Planned,
     cls: Planned,
     reg: Planned,
 }
@@ -341,11 +340,10 @@ fn load(
 
 /// The networks' runtime.
 enum Backend {
-    /// tract plans: backbone at 127 and at 255, head, and the head's two branches alone.
+    /// tract plans: backbone at 127 and at 255, the head's two branches.
     Tract {
         template: Box<Net>,
         search: Box<Net>,
-        head: Box<Net>,
         cls: Box<Net>,
         reg: Box<Net>,
     },
@@ -358,7 +356,7 @@ impl Backend {
     /// Where the backbone and the head came from.
     fn paths(&self) -> (&str, &str) {
         match self {
-            Backend::Tract { search, head, .. } => (&search.path, &head.path),
+            Backend::Tract { search, cls, .. } => (&search.path, &cls.path),
             #[cfg(feature = "cnn")]
             Backend::Ort(o) => (&o.backbone_path, &o.head_path),
         }
@@ -449,7 +447,6 @@ impl NanoVerifier {
         Ok(Plans {
             template,
             search,
-            head: head_plan(&["output1", "output2"])?,
             cls: head_plan(&["output1"])?,
             reg: head_plan(&["output2"])?,
         })
@@ -460,7 +457,6 @@ impl NanoVerifier {
         Ok(Backend::Tract {
             template: Box::new(Net::new(&plans.template)?),
             search: Box::new(Net::new(&plans.search)?),
-            head: Box::new(Net::new(&plans.head)?),
             cls: Box::new(Net::new(&plans.cls)?),
             reg: Box::new(Net::new(&plans.reg)?),
         })
@@ -497,7 +493,6 @@ impl NanoVerifier {
         v.input = vec![128.0; 3 * SEARCH_SIDE * SEARCH_SIDE];
         v.search = v.run_backbone(SEARCH_SIDE)?;
         v.run_head()?;
-        v.run_head_if(|_| true)?;
         v.template.clear();
         Ok(v)
     }
@@ -558,39 +553,6 @@ impl NanoVerifier {
         r
     }
 
-    /// As [`Self::head`], computed by the head's two branches run apart (the classification
-    /// branch, then the regression branch), as [`Verifier::search_above`] does (for tests:
-    /// the two are bit-identical).
-    ///
-    /// # Errors
-    /// [`NanoError::Run`] for wrong lengths, or an output error.
-    pub fn head_by_branches(
-        &mut self,
-        template: &[f32],
-        search: &[f32],
-    ) -> Result<(Vec<f32>, Vec<f32>), NanoError> {
-        // The same length checks and error as the whole head.
-        if template.len() != CHANNELS * TEMPLATE_CELLS * TEMPLATE_CELLS
-            || search.len() != CHANNELS * SEARCH_CELLS * SEARCH_CELLS
-        {
-            return self.head(template, search);
-        }
-        let (kept_t, kept_s) = (
-            std::mem::replace(&mut self.template, template.to_vec()),
-            std::mem::replace(&mut self.search, search.to_vec()),
-        );
-        let r = self.run_head_if(|_| true);
-        self.template = kept_t;
-        self.search = kept_s;
-        let (margins, loc) = r?;
-        let loc = loc.ok_or_else(|| NanoError::Run {
-            key: HEAD_KEY,
-            path: self.backend.paths().1.to_string(),
-            reason: "the regression branch did not run".to_string(),
-        })?;
-        Ok((margins, loc))
-    }
-
     /// Samples the square of side `region` at `center` into `self.input` (`out`², RGB).
     fn crop(&mut self, frame: &Frame<'_>, center: Point2, region: f32, out: usize) {
         let planes = frame.format().planes();
@@ -630,35 +592,17 @@ impl NanoVerifier {
     }
 
     /// Head on the template and `self.search`: per grid point the foreground logit margin
-    /// and the four box distances, `(margins[256], loc[4·256])`.
+    /// and the four box distances, `(margins[256], loc[4·256])` (both branches).
     fn run_head(&mut self) -> Result<(Vec<f32>, Vec<f32>), NanoError> {
-        let (t, x) = (TEMPLATE_CELLS, SEARCH_CELLS);
-        let head = match &mut self.backend {
-            Backend::Tract { head, .. } => head,
-            #[cfg(feature = "cnn")]
-            Backend::Ort(o) => {
-                let (cls, loc) = o.head(&self.template, &self.search)?;
-                let n = x * x;
-                let margins = (0..n).map(|i| cls[n + i] - cls[i]).collect();
-                return Ok((margins, loc));
-            }
-        };
-        let mut out = head.run(
-            &[
-                (&[1, CHANNELS, t, t], &self.template),
-                (&[1, CHANNELS, x, x], &self.search),
-            ],
-            &[("output1", &[1, 2, x, x]), ("output2", &[1, 4, x, x])],
-        )?;
-        let loc = out.swap_remove(1);
-        let cls = out.swap_remove(0);
-        let n = x * x;
-        let margins = (0..n).map(|i| cls[n + i] - cls[i]).collect();
+        let (margins, loc) = self.run_head_if(|_| true)?;
+        let loc = loc.ok_or_else(|| NanoError::Run {
+            key: HEAD_KEY,
+            path: self.backend.paths().1.to_string(),
+            reason: "the regression branch did not run".to_string(),
+        })?;
         Ok((margins, loc))
     }
-}
 
-impl NanoVerifier {
     /// The head's classification branch on the template and `self.search` (the margins),
     /// then its regression branch (the box distances) only when `want_box(&margins)`; on
     /// ONNX Runtime the whole head runs and the distances are always returned.
@@ -670,8 +614,10 @@ impl NanoVerifier {
         let (cls, reg) = match &mut self.backend {
             Backend::Tract { cls, reg, .. } => (cls, reg),
             #[cfg(feature = "cnn")]
-            Backend::Ort(_) => {
-                let (margins, loc) = self.run_head()?;
+            Backend::Ort(o) => {
+                let (cls, loc) = o.head(&self.template, &self.search)?;
+                let n = x * x;
+                let margins = (0..n).map(|i| cls[n + i] - cls[i]).collect();
                 return Ok((margins, Some(loc)));
             }
         };
@@ -820,6 +766,73 @@ impl Verifier for NanoVerifier {
             Some(loc) if score >= bar => Scored::Hit(hit_at(frame, center, side, i, score, &loc)),
             _ => Scored::Below(score),
         }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The head as one network (how it ran before its branches were planned apart): the
+    /// template and search features' margins and box distances.
+    fn whole_head(template: &[f32], search: &[f32]) -> (Vec<f32>, Vec<f32>) {
+        let (hd, name) = load(HEAD_KEY, "", EMBEDDED_HEAD).unwrap();
+        let (t, x) = (TEMPLATE_CELLS, SEARCH_CELLS);
+        let plan = Planned::new(
+            &hd,
+            HEAD_KEY,
+            &name,
+            &[
+                ("input1", &[1, CHANNELS, t, t]),
+                ("input2", &[1, CHANNELS, x, x]),
+            ],
+            &["output1", "output2"],
+        )
+        .unwrap();
+        let mut net = Net::new(&plan).unwrap();
+        let mut out = net
+            .run(
+                &[
+                    (&[1, CHANNELS, t, t], template),
+                    (&[1, CHANNELS, x, x], search),
+                ],
+                &[("output1", &[1, 2, x, x]), ("output2", &[1, 4, x, x])],
+            )
+            .unwrap();
+        let loc = out.swap_remove(1);
+        let cls = out.swap_remove(0);
+        let n = x * x;
+        ((0..n).map(|i| cls[n + i] - cls[i]).collect(), loc)
+    }
+
+    fn bits(v: &[f32]) -> Vec<u32> {
+        v.iter().map(|f| f.to_bits()).collect()
+    }
+
+    /// The head's two branches, planned and run apart (what every search runs), give the
+    /// whole head's margins and box distances bit for bit: on a textured template against
+    /// a search crop whose centre it is, and against a flat one.
+    #[test]
+    fn head_branches_run_apart_equal_the_whole_head_bit_for_bit() {
+        let mut v = NanoVerifier::new("", "").unwrap();
+        let side = SEARCH_SIDE;
+        let textured: Vec<f32> = (0..3 * side * side)
+            .map(|i| ((i % 251) as f32 / 251.0) * 255.0)
+            .collect();
+        let c = TEMPLATE_SIDE;
+        let o = (side - c) / 2;
+        let crop: Vec<f32> = (0..3)
+            .flat_map(|p| (0..c).flat_map(move |r| (0..c).map(move |k| (p, r, k))))
+            .map(|(p, r, k)| textured[(p * side + r + o) * side + k + o])
+            .collect();
+        let zf = v.backbone(&crop, TEMPLATE_SIDE).unwrap();
+        for search in [textured.clone(), vec![128.0; textured.len()]] {
+            let xf = v.backbone(&search, SEARCH_SIDE).unwrap();
+            let (margins, loc) = v.head(&zf, &xf).unwrap();
+            let (w_margins, w_loc) = whole_head(&zf, &xf);
+            assert_eq!(bits(&margins), bits(&w_margins), "margins");
+            assert_eq!(bits(&loc), bits(&w_loc), "box distances");
+        }
     }
 }
 
