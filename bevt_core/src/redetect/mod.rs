@@ -48,6 +48,26 @@ pub struct VerifierHit {
     pub score: f32,
 }
 
+/// What [`Verifier::search_above`] found in a region: the hit, or only the best score when
+/// it is below the bar asked for (the box was not regressed).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Scored {
+    /// The best score reached the bar: the hit with its box.
+    Hit(VerifierHit),
+    /// The best score, below the bar (or NaN).
+    Below(f32),
+}
+
+impl Scored {
+    /// The best score in the region.
+    pub fn score(&self) -> f32 {
+        match self {
+            Scored::Hit(h) => h.score,
+            Scored::Below(s) => *s,
+        }
+    }
+}
+
 /// NanoTrack's template context side for a `w × h` target: `√((w+p)(h+p))`, `p = (w+h)/2`
 /// (a verifier's search region is twice this).
 pub fn context_side(w: f32, h: f32) -> f32 {
@@ -81,6 +101,29 @@ pub trait Verifier: Send + std::fmt::Debug {
         center: Point2,
         side: f32,
     ) -> Result<Option<VerifierHit>, TrackError>;
+
+    /// As [`Self::search`], but the hit's box is needed only when its score is at least
+    /// `bar` ([`Scored::Hit`]); below it only the score is returned ([`Scored::Below`]), so
+    /// a verifier may skip the box regression (`bar = +∞`: the score alone). Scores and
+    /// boxes are those of [`Self::search`].
+    ///
+    /// # Errors
+    /// [`TrackError::Feature`] when the network fails.
+    fn search_above(
+        &mut self,
+        frame: &Frame<'_>,
+        center: Point2,
+        side: f32,
+        bar: f32,
+    ) -> Result<Option<Scored>, TrackError> {
+        Ok(self.search(frame, center, side)?.map(|h| {
+            if h.score >= bar {
+                Scored::Hit(h)
+            } else {
+                Scored::Below(h.score)
+            }
+        }))
+    }
 }
 
 /// Upper bound on the tiles of one plan (per scale); the stride grows to respect it.

@@ -16,8 +16,12 @@
 //! The models: empty `redetection.verifier_backbone` / `verifier_head` mean the NanoTrack v2
 //! files embedded in this crate (`models/nanotrack/`, see its README for origin, licence and
 //! sha256), so the default needs no file at run time; a path loads that file instead. Each
-//! network is optimised once per input size (backbone: 127 and 255; head: one plan) and run
-//! single-threaded.
+//! network is optimised once per input size (backbone: 127 and 255) and run single-threaded.
+//! The head is optimised as its two branches, each alone: the classification branch (the
+//! scores) and the box regression branch. They share no node after the inputs, so together
+//! they compute what the whole head does, bit for bit (tested); a search that needs only the
+//! score ([`Verifier::search_above`]: the drift check, a lost-state window below the bar)
+//! skips the regression branch, about half the head.
 //!
 //! With the cargo feature `cnn`, `redetection.verifier: nanotrack_ort` runs the same models
 //! (same crops, scoring and acceptance) on ONNX Runtime instead (`NanoVerifier::new_ort`),
@@ -27,7 +31,7 @@
 use crate::error::TrackError;
 use crate::geometry::Point2;
 use crate::image::{Frame, Patch, Sampler};
-use crate::redetect::{context_side, Verifier, VerifierHit};
+use crate::redetect::{context_side, Scored, Verifier, VerifierHit};
 use std::path::Path;
 use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 use thiserror::Error;
@@ -152,11 +156,13 @@ struct Planned {
     path: String,
 }
 
-/// The three optimised networks of one (backbone, head) pair.
+/// The optimised networks of one (backbone, head) pair: the backbone at both input sizes
+/// and the head's two branches (see the module doc).
 struct Plans {
     template: Planned,
     search: Planned,
-    head: Planned,
+    cls: Planned,
+    reg: Planned,
 }
 
 /// Optimised plans by `(verifier_backbone, verifier_head)` as configured (empty: embedded).
@@ -334,11 +340,12 @@ fn load(
 
 /// The networks' runtime.
 enum Backend {
-    /// tract plans: backbone at 127 and at 255, head.
+    /// tract plans: backbone at 127 and at 255, the head's two branches.
     Tract {
         template: Box<Net>,
         search: Box<Net>,
-        head: Box<Net>,
+        cls: Box<Net>,
+        reg: Box<Net>,
     },
     /// ONNX Runtime sessions (cargo feature `cnn`).
     #[cfg(feature = "cnn")]
@@ -349,7 +356,7 @@ impl Backend {
     /// Where the backbone and the head came from.
     fn paths(&self) -> (&str, &str) {
         match self {
-            Backend::Tract { search, head, .. } => (&search.path, &head.path),
+            Backend::Tract { search, cls, .. } => (&search.path, &cls.path),
             #[cfg(feature = "cnn")]
             Backend::Ort(o) => (&o.backbone_path, &o.head_path),
         }
@@ -425,20 +432,23 @@ impl NanoVerifier {
         let template = backbone_plan(TEMPLATE_SIDE)?;
         let search = backbone_plan(SEARCH_SIDE)?;
         let (t, x) = (TEMPLATE_CELLS, SEARCH_CELLS);
-        let head = Planned::new(
-            &hd,
-            HEAD_KEY,
-            &hd_name,
-            &[
-                ("input1", &[1, CHANNELS, t, t]),
-                ("input2", &[1, CHANNELS, x, x]),
-            ],
-            &["output1", "output2"],
-        )?;
+        let head_plan = |outputs: &[&str]| {
+            Planned::new(
+                &hd,
+                HEAD_KEY,
+                &hd_name,
+                &[
+                    ("input1", &[1, CHANNELS, t, t]),
+                    ("input2", &[1, CHANNELS, x, x]),
+                ],
+                outputs,
+            )
+        };
         Ok(Plans {
             template,
             search,
-            head,
+            cls: head_plan(&["output1"])?,
+            reg: head_plan(&["output2"])?,
         })
     }
 
@@ -447,7 +457,8 @@ impl NanoVerifier {
         Ok(Backend::Tract {
             template: Box::new(Net::new(&plans.template)?),
             search: Box::new(Net::new(&plans.search)?),
-            head: Box::new(Net::new(&plans.head)?),
+            cls: Box::new(Net::new(&plans.cls)?),
+            reg: Box::new(Net::new(&plans.reg)?),
         })
     }
 
@@ -581,31 +592,90 @@ impl NanoVerifier {
     }
 
     /// Head on the template and `self.search`: per grid point the foreground logit margin
-    /// and the four box distances, `(margins[256], loc[4·256])`.
+    /// and the four box distances, `(margins[256], loc[4·256])` (both branches).
     fn run_head(&mut self) -> Result<(Vec<f32>, Vec<f32>), NanoError> {
+        let (margins, loc) = self.run_head_if(|_| true)?;
+        let loc = loc.ok_or_else(|| NanoError::Run {
+            key: HEAD_KEY,
+            path: self.backend.paths().1.to_string(),
+            reason: "the regression branch did not run".to_string(),
+        })?;
+        Ok((margins, loc))
+    }
+
+    /// The head's classification branch on the template and `self.search` (the margins),
+    /// then its regression branch (the box distances) only when `want_box(&margins)`; on
+    /// ONNX Runtime the whole head runs and the distances are always returned.
+    fn run_head_if(
+        &mut self,
+        want_box: impl FnOnce(&[f32]) -> bool,
+    ) -> Result<(Vec<f32>, Option<Vec<f32>>), NanoError> {
         let (t, x) = (TEMPLATE_CELLS, SEARCH_CELLS);
-        let head = match &mut self.backend {
-            Backend::Tract { head, .. } => head,
+        let (cls, reg) = match &mut self.backend {
+            Backend::Tract { cls, reg, .. } => (cls, reg),
             #[cfg(feature = "cnn")]
             Backend::Ort(o) => {
                 let (cls, loc) = o.head(&self.template, &self.search)?;
                 let n = x * x;
                 let margins = (0..n).map(|i| cls[n + i] - cls[i]).collect();
-                return Ok((margins, loc));
+                return Ok((margins, Some(loc)));
             }
         };
-        let mut out = head.run(
-            &[
-                (&[1, CHANNELS, t, t], &self.template),
-                (&[1, CHANNELS, x, x], &self.search),
-            ],
-            &[("output1", &[1, 2, x, x]), ("output2", &[1, 4, x, x])],
-        )?;
-        let loc = out.swap_remove(1);
-        let cls = out.swap_remove(0);
+        let inputs: [(&[usize], &[f32]); 2] = [
+            (&[1, CHANNELS, t, t], &self.template),
+            (&[1, CHANNELS, x, x], &self.search),
+        ];
+        let logits = cls
+            .run(&inputs, &[("output1", &[1, 2, x, x])])?
+            .swap_remove(0);
         let n = x * x;
-        let margins = (0..n).map(|i| cls[n + i] - cls[i]).collect();
-        Ok((margins, loc))
+        let margins: Vec<f32> = (0..n).map(|i| logits[n + i] - logits[i]).collect();
+        if !want_box(&margins) {
+            return Ok((margins, None));
+        }
+        let loc = reg
+            .run(&inputs, &[("output2", &[1, 4, x, x])])?
+            .swap_remove(0);
+        Ok((margins, Some(loc)))
+    }
+}
+
+/// The grid point with the largest margin and that margin (`None` for no points).
+fn best_point(margins: &[f32]) -> Option<(usize, f32)> {
+    margins
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(i, &m)| (i, m))
+}
+
+/// The hit of grid point `i` (score `score`, box distances `loc`) of the search crop of
+/// side `side` at `center` of `frame`.
+fn hit_at(
+    frame: &Frame<'_>,
+    center: Point2,
+    side: f32,
+    i: usize,
+    score: f32,
+    loc: &[f32],
+) -> VerifierHit {
+    let n = SEARCH_CELLS * SEARCH_CELLS;
+    let (j, k) = (i / SEARCH_CELLS, i % SEARCH_CELLS);
+    let gx = (k as f32 - 8.0) * STRIDE + GRID_CENTRE;
+    let gy = (j as f32 - 8.0) * STRIDE + GRID_CENTRE;
+    let (l, t, r, b) = (loc[i], loc[n + i], loc[2 * n + i], loc[3 * n + i]);
+    let px = side / SEARCH_SIDE as f32;
+    let fw = frame.width() as f32;
+    let fh = frame.height() as f32;
+    let pos = Point2 {
+        x: (center.x + (gx + 0.5 * (r - l) - GRID_CENTRE) * px).clamp(0.0, fw),
+        y: (center.y + (gy + 0.5 * (b - t) - GRID_CENTRE) * px).clamp(0.0, fh),
+    };
+    VerifierHit {
+        pos,
+        w: ((l + r) * px).max(1.0),
+        h: ((t + b) * px).max(1.0),
+        score,
     }
 }
 
@@ -672,27 +742,97 @@ impl Verifier for NanoVerifier {
         self.crop(frame, center, side, SEARCH_SIDE);
         self.search = self.run_backbone(SEARCH_SIDE)?;
         let (margins, loc) = self.run_head()?;
-        let Some((i, &score)) = margins.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)) else {
+        Ok(best_point(&margins).map(|(i, score)| hit_at(frame, center, side, i, score, &loc)))
+    }
+
+    fn search_above(
+        &mut self,
+        frame: &Frame<'_>,
+        center: Point2,
+        side: f32,
+        bar: f32,
+    ) -> Result<Option<Scored>, TrackError> {
+        if self.template.is_empty() || !(side.is_finite() && side > 0.0) {
+            return Ok(None);
+        }
+        self.crop(frame, center, side, SEARCH_SIDE);
+        self.search = self.run_backbone(SEARCH_SIDE)?;
+        let reaches = |m: &[f32]| best_point(m).is_some_and(|(_, s)| s >= bar);
+        let (margins, loc) = self.run_head_if(reaches)?;
+        let Some((i, score)) = best_point(&margins) else {
             return Ok(None);
         };
-        let n = SEARCH_CELLS * SEARCH_CELLS;
-        let (j, k) = (i / SEARCH_CELLS, i % SEARCH_CELLS);
-        let gx = (k as f32 - 8.0) * STRIDE + GRID_CENTRE;
-        let gy = (j as f32 - 8.0) * STRIDE + GRID_CENTRE;
-        let (l, t, r, b) = (loc[i], loc[n + i], loc[2 * n + i], loc[3 * n + i]);
-        let px = side / SEARCH_SIDE as f32;
-        let fw = frame.width() as f32;
-        let fh = frame.height() as f32;
-        let pos = Point2 {
-            x: (center.x + (gx + 0.5 * (r - l) - GRID_CENTRE) * px).clamp(0.0, fw),
-            y: (center.y + (gy + 0.5 * (b - t) - GRID_CENTRE) * px).clamp(0.0, fh),
-        };
-        Ok(Some(VerifierHit {
-            pos,
-            w: ((l + r) * px).max(1.0),
-            h: ((t + b) * px).max(1.0),
-            score,
+        Ok(Some(match loc {
+            Some(loc) if score >= bar => Scored::Hit(hit_at(frame, center, side, i, score, &loc)),
+            _ => Scored::Below(score),
         }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The head as one network (how it ran before its branches were planned apart): the
+    /// template and search features' margins and box distances.
+    fn whole_head(template: &[f32], search: &[f32]) -> (Vec<f32>, Vec<f32>) {
+        let (hd, name) = load(HEAD_KEY, "", EMBEDDED_HEAD).unwrap();
+        let (t, x) = (TEMPLATE_CELLS, SEARCH_CELLS);
+        let plan = Planned::new(
+            &hd,
+            HEAD_KEY,
+            &name,
+            &[
+                ("input1", &[1, CHANNELS, t, t]),
+                ("input2", &[1, CHANNELS, x, x]),
+            ],
+            &["output1", "output2"],
+        )
+        .unwrap();
+        let mut net = Net::new(&plan).unwrap();
+        let mut out = net
+            .run(
+                &[
+                    (&[1, CHANNELS, t, t], template),
+                    (&[1, CHANNELS, x, x], search),
+                ],
+                &[("output1", &[1, 2, x, x]), ("output2", &[1, 4, x, x])],
+            )
+            .unwrap();
+        let loc = out.swap_remove(1);
+        let cls = out.swap_remove(0);
+        let n = x * x;
+        ((0..n).map(|i| cls[n + i] - cls[i]).collect(), loc)
+    }
+
+    fn bits(v: &[f32]) -> Vec<u32> {
+        v.iter().map(|f| f.to_bits()).collect()
+    }
+
+    /// The head's two branches, planned and run apart (what every search runs), give the
+    /// whole head's margins and box distances bit for bit: on a textured template against
+    /// a search crop whose centre it is, and against a flat one.
+    #[test]
+    fn head_branches_run_apart_equal_the_whole_head_bit_for_bit() {
+        let mut v = NanoVerifier::new("", "").unwrap();
+        let side = SEARCH_SIDE;
+        let textured: Vec<f32> = (0..3 * side * side)
+            .map(|i| ((i % 251) as f32 / 251.0) * 255.0)
+            .collect();
+        let c = TEMPLATE_SIDE;
+        let o = (side - c) / 2;
+        let crop: Vec<f32> = (0..3)
+            .flat_map(|p| (0..c).flat_map(move |r| (0..c).map(move |k| (p, r, k))))
+            .map(|(p, r, k)| textured[(p * side + r + o) * side + k + o])
+            .collect();
+        let zf = v.backbone(&crop, TEMPLATE_SIDE).unwrap();
+        for search in [textured.clone(), vec![128.0; textured.len()]] {
+            let xf = v.backbone(&search, SEARCH_SIDE).unwrap();
+            let (margins, loc) = v.head(&zf, &xf).unwrap();
+            let (w_margins, w_loc) = whole_head(&zf, &xf);
+            assert_eq!(bits(&margins), bits(&w_margins), "margins");
+            assert_eq!(bits(&loc), bits(&w_loc), "box distances");
+        }
     }
 }
 

@@ -40,7 +40,8 @@ pub(super) struct DriftCheck {
 /// What a tracked frame reports: state, reason and the published confidence.
 pub(super) type Report = (TrackState, StateReason, f32);
 
-/// The verifier's best score around the box (`None`: no template, nothing to witness).
+/// The verifier's best score around the box (`None`: no template, nothing to witness):
+/// the score alone, no box regression.
 fn score_at_box(
     st: &State,
     frame: &Frame<'_>,
@@ -48,7 +49,8 @@ fn score_at_box(
 ) -> Result<Option<f32>, TrackError> {
     let size = st.target_size();
     let side = 2.0 * context_side(size.w, size.h);
-    Ok(v.search(frame, st.pos, side)?.map(|h| h.score))
+    Ok(v.search_above(frame, st.pos, side, f32::INFINITY)?
+        .map(|s| s.score()))
 }
 
 /// The confidence published with a box the verifier scores `score` below `threshold`:

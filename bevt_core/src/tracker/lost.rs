@@ -24,7 +24,7 @@ use crate::geometry::Point2;
 use crate::image::Frame;
 use crate::redetect::{
     candidate_threshold, context_side, propose, Appearance, Candidate, CandidateTracker,
-    ProposalScratch, SearchPlan, Verifier, VerifierHit,
+    ProposalScratch, Scored, SearchPlan, Verifier, VerifierHit,
 };
 use crate::track_state::TrackState;
 use crate::tracker::TrackOutput;
@@ -258,13 +258,17 @@ fn verify(
     let near = VERIFIER_NEAR * verifier_side(st, st.lost.scale_at_loss);
     st.lost.vcand.begin_frame(near);
     let mut passes = r.verifier_windows;
+    // Only hits at or above `thr` can be followed or offered: below it the box is not
+    // needed (`followed` drops the candidate, `offer` ignores the hit; the head's outputs
+    // are checked finite, so a score is never NaN).
     if let Some(c) = st.lost.vcand.current() {
-        let hit = v.search(frame, c.pos, 2.0 * verifier_side(st, c.scale))?;
+        let hit = v.search_above(frame, c.pos, 2.0 * verifier_side(st, c.scale), thr)?;
         match hit {
-            Some(h) => {
+            Some(Scored::Hit(h)) => {
                 let scale = hit_scale(st, &h);
                 st.lost.vcand.followed(h.pos, scale, h.score, thr);
             }
+            Some(Scored::Below(s)) => st.lost.vcand.followed(c.pos, c.scale, s, thr),
             None => st
                 .lost
                 .vcand
@@ -277,7 +281,8 @@ fn verify(
             break;
         };
         let scale = st.lost.scale_at_loss * w.scale;
-        if let Some(h) = v.search(frame, w.center, 2.0 * verifier_side(st, scale))? {
+        let side = 2.0 * verifier_side(st, scale);
+        if let Some(Scored::Hit(h)) = v.search_above(frame, w.center, side, thr)? {
             let scale = hit_scale(st, &h);
             st.lost.vcand.offer(h.pos, scale, h.score, thr);
         }
