@@ -31,8 +31,16 @@ aarch64_env() {
   # searches /usr/include/aarch64-linux-gnu (opensslconf.h) before /usr/include itself.
   export PKG_CONFIG_ALLOW_CROSS_aarch64_unknown_linux_gnu=1
   export PKG_CONFIG_LIBDIR_aarch64_unknown_linux_gnu=/usr/lib/aarch64-linux-gnu/pkgconfig:/usr/share/pkgconfig
-  # `cargo test` / `cargo run` for the target run under user-mode emulation.
-  export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu"
+  # The emulator command for aarch64 programs (`cargo test` / `cargo run` for the target,
+  # scripts/test-aarch64.sh, scripts/check-deb.sh). glibc's dynamic loader and its libc.so.6
+  # must come from the same build of glibc: -L makes qemu start the cross toolchain's loader
+  # (/usr/aarch64-linux-gnu/lib), and LD_LIBRARY_PATH makes that loader take the cross libc
+  # before the multiarch libc6:arm64 that the host's ld.so.cache lists once libssl-dev:arm64
+  # is installed (below). Mixed, every program that starts a thread hangs (2026-11-25:
+  # libc6-arm64-cross 2.36-8cross1 against libc6:arm64 2.36-9+deb12u14). The arm64 OpenSSL
+  # is then found in the multiarch folder.
+  export BEVT_QEMU_AARCH64="qemu-aarch64 -L /usr/aarch64-linux-gnu -E LD_LIBRARY_PATH=/usr/aarch64-linux-gnu/lib:/usr/lib/aarch64-linux-gnu"
+  export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER="$BEVT_QEMU_AARCH64"
 }
 
 if [ "${1:-}" = env ]; then

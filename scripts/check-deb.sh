@@ -3,7 +3,10 @@
 # the binaries, the parameters file, every tracker preset of config/, the systemd unit, the
 # sysusers.d user and the licences; `dpkg-deb --info` must show the conffiles, a libssl
 # dependency and the maintainer scripts that create the user and reload systemd; the
-# packaged bevt_node must run (`--help`). Prints the package's and the binaries' sizes, and
+# packaged bevt_node must run (`--help`). The package's Architecture (amd64 or arm64) must be
+# the machine of every packaged program (ELF x86-64 or ARM aarch64); a package for another
+# architecture than this host's is run under qemu-user (arm64: qemu-aarch64 with the cross
+# glibc and the multiarch arm64 libraries). Prints the package's and the binaries' sizes, and
 # for the flight profile fails if a binary is 30 MB or larger (issue 21).
 #
 # Usage: scripts/check-deb.sh DEB [PROFILE]
@@ -63,12 +66,36 @@ if [ -f "$unit" ]; then
   fi
 fi
 cmp -s "$x/etc/bevt_node/node.yaml" config/node.yaml || problem "/etc/bevt_node/node.yaml differs from config/node.yaml"
+
+# The architecture the control file names is the one the programs were built for.
+arch=$(dpkg-deb --field "$deb" Architecture)
+run=()
+case "$arch" in
+  amd64) machine='x86-64' ;;
+  arm64) machine='ARM aarch64' ;;
+  *) problem "Architecture: $arch (amd64 or arm64 expected)"; machine='?' ;;
+esac
+if [ "$arch" = arm64 ] && [ "$(dpkg --print-architecture)" != arm64 ]; then
+  # The cross glibc, and the arm64 OpenSSL where multiarch put it (scripts/build-aarch64.sh).
+  # shellcheck source=build-aarch64.sh
+  . scripts/build-aarch64.sh env
+  read -ra run <<<"$BEVT_QEMU_AARCH64"
+  command -v qemu-aarch64 >/dev/null || problem "qemu-aarch64 (Debian's qemu-user) is needed to run the arm64 programs"
+fi
+for b in bevt_node bevt bevt_latency; do
+  f="$x/usr/bin/$b"
+  [ -f "$f" ] || continue
+  file -b "$f" | grep -q "ELF 64-bit LSB .*, $machine,"     || problem "/usr/bin/$b is not an $arch program: $(file -b "$f" | cut -d, -f1-2)"
+done
 if [ -x "$x/usr/bin/bevt_node" ]; then
-  "$x/usr/bin/bevt_node" --help | grep -q -- "--params-file" || problem "the packaged bevt_node --help failed"
+  "${run[@]}" "$x/usr/bin/bevt_node" --help | grep -q -- "--params-file" \
+    || problem "the packaged bevt_node --help failed${run[*]:+ under ${run[*]}}"
+  "${run[@]}" "$x/usr/bin/bevt" --help | grep -q '^Usage:' \
+    || problem "the packaged bevt --help failed${run[*]:+ under ${run[*]}}"
 fi
 
 limit=$((30 * 1000 * 1000))
-echo "check-deb: $(basename "$deb"): $(stat -c %s "$deb") bytes ($profile profile)"
+echo "check-deb: $(basename "$deb"): $(stat -c %s "$deb") bytes ($profile profile, $arch)"
 for b in bevt_node bevt bevt_latency; do
   f="$x/usr/bin/$b"
   [ -f "$f" ] || continue

@@ -34,6 +34,33 @@ for f in launch/bevt.launch.py config/node.yaml config/bevt.yaml config/cnn_fusi
   test -f "$share/$f" || { echo "colcon did not install share/bevt_node/$f"; exit 1; }
 done
 "$py" -m py_compile "$share/launch/bevt.launch.py"
+# launch / launch_ros are not on PyPI, so the launch file cannot be run here (docs/ros.md says
+# how it was run by hand): read it instead. Its arguments must be the four docs/ros.md
+# documents, and its Node must name this package and an executable colcon installed.
+"$py" - "$share/launch/bevt.launch.py" "$ws/install/bevt_node/lib/bevt_node" <<'EOF'
+import ast
+import os
+import sys
+
+path, libdir = sys.argv[1], sys.argv[2]
+tree = ast.parse(open(path).read(), path)
+args = None
+node_kw = {}
+for node in ast.walk(tree):
+    if isinstance(node, ast.Assign) and any(getattr(t, "id", "") == "ARGUMENTS" for t in node.targets):
+        args = [elt.elts[0].value for elt in node.value.elts]
+    if isinstance(node, ast.Call) and getattr(node.func, "id", "") == "Node":
+        node_kw = {k.arg: k.value for k in node.keywords}
+want = ["params_file", "namespace", "image_topic", "respawn"]
+if args != want:
+    sys.exit(f"{path}: launch arguments {args}, expected {want}")
+for key in ("package", "executable"):
+    value = getattr(node_kw.get(key), "value", None)
+    if value != "bevt_node":
+        sys.exit(f"{path}: Node({key}={value!r}), expected 'bevt_node'")
+if not os.access(os.path.join(libdir, "bevt_node"), os.X_OK):
+    sys.exit(f"the launch file's executable is not installed in {libdir}")
+EOF
 # The installed executable runs (and rejects a bad argument with a clear message).
 out=$("$ws/install/bevt_node/lib/bevt_node/bevt_node" --bogus-flag 2>&1 || true)
 grep -q "unknown argument" <<<"$out"

@@ -17,7 +17,9 @@ work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 gcc -shared -fPIC -O2 -Wall -Wextra -o "$work/insn_count.so" "$here/insn-count/insn_count.c"
 case "$arch" in
-  aarch64) qemu=(qemu-aarch64 -L /usr/aarch64-linux-gnu) ;;
+  # The cross glibc pinned, as scripts/build-aarch64.sh explains ($BEVT_QEMU_AARCH64).
+  aarch64) qemu=(qemu-aarch64 -L /usr/aarch64-linux-gnu
+             -E LD_LIBRARY_PATH=/usr/aarch64-linux-gnu/lib:/usr/lib/aarch64-linux-gnu) ;;
   x86_64) qemu=(qemu-x86_64) ;;
   *) echo "insn-count: unknown architecture '$arch' (aarch64 or x86_64)" >&2; exit 2 ;;
 esac

@@ -14,13 +14,20 @@
 # Environment:
 #   BEVT_DATASET     dataset root (default ../shared/datasets/uav123_10fps_dev)
 #   TOLERANCE_PX     largest allowed |aarch64 - x86_64| of a box coordinate (default below)
-#   AARCH64_FEATURES cargo features of the cross-built programs (default `jazzy`: no DDS
+#   AARCH64_FEATURES cargo features of bevt_node for the cross build (default `jazzy`: no DDS
 #                    Security, so no arm64 OpenSSL to install; the tracker is the same code)
+#   QEMU_TIMEOUT_S   time limit of each emulated run (the unit tests, the eval; default 900)
 #
 # Installs what is missing (rustup target, gcc-aarch64-linux-gnu, qemu-user). Nothing is
 # skipped: a missing tool, dataset or sequence is an error (exit 1), as is any mismatch.
-# Builds in the dev profile (the profile the tests use), so under CI the native `bevt` is the
-# one `cargo test --workspace` already built.
+#
+# Cost (docs/testing.md#ci): the test build and the programs are one feature resolution
+# (`-p bevt_core -p bevt_node` in both cargo commands), so every dependency, tract included,
+# is compiled once for aarch64; a cargo command with `-p bevt_core` alone resolves shared
+# dependencies' features differently from one with `-p bevt_node` and compiled tract's tree
+# twice. Dev profile (the profile the tests use, with its per-package opt-levels), so under
+# CI the native `bevt` is the one `cargo test --workspace` already built; no incremental
+# state for a one-off build.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -29,6 +36,7 @@ sequence=${1:-wakeboard7}
 dataset=${BEVT_DATASET:-../shared/datasets/uav123_10fps_dev}
 tolerance=${TOLERANCE_PX:-3}
 features=${AARCH64_FEATURES:-jazzy}
+QEMU_TIMEOUT_S=${QEMU_TIMEOUT_S:-900}
 
 fail() { echo "test-aarch64: FAILED: $*" >&2; exit 1; }
 step() { printf 'test-aarch64: %s (%ss)\n' "$1" "$SECONDS" >&2; }
@@ -50,19 +58,80 @@ for tool in aarch64-linux-gnu-gcc qemu-aarch64; do
   command -v "$tool" >/dev/null || fail "$tool is missing after installing it"
 done
 [ -d "$dataset" ] || fail "no dataset at $dataset (set BEVT_DATASET)"
+[ -d "$dataset/data_seq/$sequence" ] || fail "no sequence $sequence in $dataset/data_seq"
 
 # shellcheck source=build-aarch64.sh
 . scripts/build-aarch64.sh env
+export CARGO_INCREMENTAL=0
 target_dir=${CARGO_TARGET_DIR:-$PWD/target}
-qemu=(qemu-aarch64 -L /usr/aarch64-linux-gnu)
+read -ra qemu <<<"$BEVT_QEMU_AARCH64"
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
 
-step "bevt_core unit tests for $triple, under ${qemu[*]}"
-cargo test --locked -p bevt_core --target "$triple" --lib -q
+# One package selection and one feature set for both cargo commands below. bevt_node's
+# features are named per package (a multi-package command cannot take bare ones), and
+# bevt_core keeps its default features.
+node_features=$(tr ',' '\n' <<<"$features" | sed '/^ *$/d; s#^ *#bevt_node/#' | paste -sd, -)
+[ -n "$node_features" ] || fail "AARCH64_FEATURES is empty (name a ROS distro feature: jazzy or humble)"
+selection=(--locked --target "$triple" -p bevt_core -p bevt_node --no-default-features
+  --features "bevt_core/default,$node_features")
 
-step "build bevt_node and bevt for $triple (features: $features)"
-cargo build --locked -p bevt_node --bin bevt_node --bin bevt --target "$triple" \
-  --no-default-features --features "$features"
+step "build bevt_core's unit tests for $triple (bevt_node features: $features)"
+cargo test --no-run "${selection[@]}" --lib --message-format=json-render-diagnostics \
+  >"$work/test-build.json" || fail "cross build of the unit tests"
+core_tests=$(python3 - "$work/test-build.json" <<'EOF'
+import json
+import sys
+
+for line in open(sys.argv[1]):
+    try:
+        msg = json.loads(line)
+    except ValueError:
+        continue
+    if (msg.get("reason") == "compiler-artifact" and msg.get("executable")
+            and msg["target"]["name"] == "bevt_core" and msg["profile"]["test"]):
+        print(msg["executable"])
+EOF
+)
+[ -n "$core_tests" ] && [ -x "$core_tests" ] || fail "no bevt_core test executable in cargo's output"
+
+step "build bevt_node and bevt for $triple"
+cargo build "${selection[@]}" --bin bevt_node --bin bevt
 arm_bin="$target_dir/$triple/debug"
+
+step "bevt_core unit tests under ${qemu[*]}"
+file -b "$core_tests" | grep -q 'ARM aarch64' || fail "$core_tests is not an aarch64 program"
+# Left out under emulation, by name (listed in the output): the tracker tests that run the
+# NanoTrack networks frame after frame. The dev profile builds tract outside its kernels at
+# opt-level 0 (Cargo.toml), which qemu then emulates instruction by instruction: these seven
+# took 53-623 s each, about 20 minutes together (2026-11-25, docs/testing.md#ci), against
+# about 40 s for the other 129. They run natively in `cargo test --workspace`; on aarch64,
+# tract's arm64 kernels are exercised by the eval below, whose default configuration runs
+# the NanoTrack drift check every 15 confident frames and whose boxes and states must match.
+skipped=(
+  tracker::tests::a_confirmed_drift_makes_the_track_lost_with_its_reason
+  tracker::tests::box_refine_does_not_hurt_a_target_under_20_px
+  tracker::tests::box_refine_follows_an_aspect_change_the_filter_cannot
+  tracker::tests::box_refine_keeps_up_with_a_fast_size_change
+  tracker::tests::box_refine_survives_a_box_at_the_frame_edge_and_tiny_frames
+  tracker::tests::the_drift_check_flags_a_box_left_on_background
+  tracker::tests::the_verifier_confirms_unconfident_frames_on_the_target
+)
+listed=$("${qemu[@]}" "$core_tests" --list --format terse) || fail "listing bevt_core's unit tests under qemu"
+skip_args=()
+for t in "${skipped[@]}"; do
+  # A renamed or deleted test must leave this list too.
+  grep -qxF "$t: test" <<<"$listed" || fail "no unit test $t in bevt_core (update the list)"
+  echo "test-aarch64: not run under qemu (NanoTrack per frame, tract at opt-level 0): $t" >&2
+  skip_args+=(--skip "$t")
+done
+# Run from the package's folder, as `cargo test` would.
+# A time limit, so that a hang (e.g. a glibc mismatch, scripts/build-aarch64.sh) fails the
+# step instead of stalling CI: about 25x the time the tests take (docs/testing.md#ci).
+(cd bevt_core && timeout "$QEMU_TIMEOUT_S" "${qemu[@]}" "$core_tests" -q --exact "${skip_args[@]}") ||
+  fail "bevt_core's unit tests under qemu (exit $?; 124: not done in $QEMU_TIMEOUT_S s)"
+
+step "--help of the aarch64 programs under qemu"
 for prog in bevt_node bevt; do
   file -b "$arm_bin/$prog" | grep -q 'ARM aarch64' || fail "$arm_bin/$prog is not an aarch64 program"
   help=$("${qemu[@]}" "$arm_bin/$prog" --help) || fail "$prog --help under qemu exited with $?"
@@ -73,17 +142,34 @@ step "native bevt (x86_64)"
 cargo build --locked -p bevt_node --bin bevt
 native_bin="$target_dir/debug"
 
-work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
 step "bevt eval --sequences $sequence: x86_64, then aarch64 under qemu"
 "$native_bin/bevt" eval --dataset "$dataset" --sequences "$sequence" --out "$work/x86_64" \
   >"$work/x86_64.log" 2>&1 || { cat "$work/x86_64.log" >&2; fail "native bevt eval"; }
-"${qemu[@]}" "$arm_bin/bevt" eval --dataset "$dataset" --sequences "$sequence" \
-  --out "$work/aarch64" >"$work/aarch64.log" 2>&1 ||
-  { cat "$work/aarch64.log" >&2; fail "aarch64 bevt eval under qemu"; }
+timeout "$QEMU_TIMEOUT_S" "${qemu[@]}" "$arm_bin/bevt" eval --dataset "$dataset" \
+  --sequences "$sequence" --out "$work/aarch64" >"$work/aarch64.log" 2>&1 ||
+  { rc=$?; cat "$work/aarch64.log" >&2; fail "aarch64 bevt eval under qemu (exit $rc)"; }
 
-step "compare boxes (tolerance $tolerance px)"
-python3 - "$work/x86_64/$sequence.txt" "$work/aarch64/$sequence.txt" "$tolerance" <<'EOF'
+step "compare track states (equal) and boxes (tolerance $tolerance px)"
+python3 - "$work/x86_64/$sequence.state.csv" "$work/aarch64/$sequence.state.csv" <<'EOF' ||
+import csv
+import sys
+
+def states(path):
+    try:
+        with open(path, newline="") as f:
+            return [(row["frame"], row["state"]) for row in csv.DictReader(f)]
+    except (OSError, KeyError, csv.Error) as e:
+        sys.exit(f"cannot read track states: {e}")
+
+x86, arm = states(sys.argv[1]), states(sys.argv[2])
+if not x86 or x86 != arm:
+    diff = next((f"frame {a[0]}: {a[1]} on x86_64, {b[1]} on aarch64"
+                 for a, b in zip(x86, arm) if a != b), f"{len(x86)} / {len(arm)} rows")
+    sys.exit(f"the track states differ ({diff})")
+print(f"test-aarch64: {len(x86)} track states equal", file=sys.stderr)
+EOF
+  fail "track states of $sequence"
+python3 - "$work/x86_64/$sequence.txt" "$work/aarch64/$sequence.txt" "$tolerance" <<'EOF' ||
 import math
 import sys
 
@@ -121,4 +207,5 @@ if worst > tol:
     sys.exit(f"frame {worst_frame}: aarch64 and x86_64 boxes differ by {worst:g} px, "
              f"more than the tolerance {tol:g} px")
 EOF
+  fail "boxes of $sequence"
 step "passed"
