@@ -469,13 +469,13 @@ pub struct BoxRefineConfig {
     /// tracked frame (pure Rust); `nanotrack_ort`: the same on ONNX Runtime (cargo feature
     /// `cnn`). The networks are `redetection.verifier_backbone` / `verifier_head`.
     pub mode: BoxRefineMode,
-    /// Head foreground probability at or above which its box is taken (else the scale
-    /// filter's size is kept).
+    /// Head foreground probability at or above which its box is taken (else the prior is
+    /// kept).
     pub min_score: f32,
     /// Largest distance between the head's and the filter's box centres, in target sizes
     /// (√(w·h)), for the head's box to be taken.
     pub max_offset: f32,
-    /// Targets whose shorter side is below this (pixels) keep the filter's box.
+    /// Targets whose shorter side is below this (pixels) keep the prior box.
     pub min_side: f32,
     /// Weight of the head's centre against the filter's when the head's box is taken (0:
     /// the filter's centre, 1: the head's).

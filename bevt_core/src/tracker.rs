@@ -1342,8 +1342,9 @@ mod tests {
         let (box_ref, last) = ious(&seq, &refined(&cfg));
         let truth = seq.truth(seq.frames - 1);
         let ratio = |b: &BBox| (b.w / b.h) / (truth.w / truth.h);
-        // Measured: 0.71 of the truth's aspect with the stage, 0.50 without (the
-        // filter's box never changes aspect); the size smoothing keeps it behind.
+        // Measured: 0.75 of the truth's aspect with the stage, 0.50 without (the
+        // filter's box never changes aspect); last-15 mean IoU 0.79 against 0.57. The
+        // size smoothing keeps it behind.
         assert!(
             ratio(&last) > 0.62 && ratio(&last) < 1.4,
             "aspect {} of the truth's (filter alone {})",
@@ -1397,7 +1398,9 @@ mod tests {
     #[test]
     fn box_refine_does_not_jump_to_a_look_alike_beside_the_target() {
         // A copy of the target 1.5 widths to its right on every frame: the box keeps the
-        // filter's centre and its size changes by at most max_change a frame.
+        // filter's centre and its size changes by at most max_change a frame. Measured:
+        // mean IoU 0.957 against the filter alone's 0.976 (the head's box of this synthetic
+        // texture is a little loose; without calibration it cost 0.033).
         let seq = SynthParams {
             frames: 30,
             scale_rate: 1.0,
@@ -1426,7 +1429,7 @@ mod tests {
         };
         assert!(iou(&with) > 0.6, "mean IoU {}", iou(&with));
         assert!(
-            iou(&with) >= iou(&plain) - 0.02,
+            iou(&with) >= iou(&plain) - 0.03,
             "mean IoU {} vs filter alone {}",
             iou(&with),
             iou(&plain)
@@ -1435,9 +1438,8 @@ mod tests {
 
     #[test]
     fn box_refine_keeps_up_with_a_fast_size_change() {
-        // ×2.7 in 50 frames (2 % a frame). On this texture the scale filter alone does
-        // better (mean IoU 0.974 against 0.940 measured): the head's box is noisier here;
-        // the test bounds that cost and the final size.
+        // ×2.7 in 50 frames (2 % a frame). Measured: mean IoU 0.974 with and without the
+        // stage, final size 1.03 of the truth's; the test bounds the cost and the size.
         let seq = SynthParams {
             frames: 50,
             target: (30.0, 24.0),
@@ -1451,7 +1453,7 @@ mod tests {
         let area = (last.w * last.h / (truth.w * truth.h)).sqrt();
         assert!((area - 1.0).abs() < 0.2, "size {area} of the truth's");
         assert!(
-            mean(&box_ref) > mean(&plain) - 0.05,
+            mean(&box_ref) > mean(&plain) - 0.02,
             "mean IoU {} vs filter alone {}",
             mean(&box_ref),
             mean(&plain)
@@ -1470,13 +1472,19 @@ mod tests {
         let cfg = TrackerConfig::default();
         let (plain, _) = ious(&seq, &cfg);
         // `box_refine.min_side` (20 px) makes the stage step aside: the same boxes. With
-        // `min_side: 0` the head costs 0.026 mean IoU here (0.910 against 0.936 measured).
+        // `min_side: 0` the head costs 0.006 mean IoU here (0.930 against 0.936 measured).
         let (box_ref, _) = ious(&seq, &refined(&cfg));
         assert_eq!(box_ref, plain);
         let mut on = refined(&cfg);
         on.box_refine.min_side = 0.0;
         let (forced, _) = ious(&seq, &on);
         assert_ne!(forced, plain, "the head runs below min_side when told to");
+        assert!(
+            mean(&forced) >= mean(&plain) - 0.02,
+            "forced: mean IoU {} vs filter alone {}",
+            mean(&forced),
+            mean(&plain)
+        );
         assert!(
             mean(&box_ref) >= mean(&plain) - 0.02,
             "mean IoU {} vs filter alone {}",
