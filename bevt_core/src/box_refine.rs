@@ -187,7 +187,7 @@ pub fn read_at(
             count += 1;
         }
     }
-    if count == 0 || !(wsum > 0.0) {
+    if count == 0 || wsum <= 0.0 {
         return None;
     }
     let [x1, y1, x2, y2] = acc.map(|v| v / wsum);
@@ -424,7 +424,7 @@ impl BoxRefiner {
         prior: Size2,
     ) -> Result<Refined, TrackError> {
         let skip = fuse(None, filter_pos, prior, &self.cfg);
-        let due = self.frames % self.cfg.interval.max(1) == 0;
+        let due = self.frames.is_multiple_of(self.cfg.interval.max(1));
         self.frames = self.frames.wrapping_add(1);
         if !due || prior.w.min(prior.h) < self.cfg.min_side || !self.net.has_template() {
             return Ok(skip);
