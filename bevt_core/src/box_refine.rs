@@ -4,26 +4,31 @@
 //!
 //! The filter keeps the first frame's aspect ratio, and its scale filter follows a size
 //! change late; a Siamese head trained for tracking regresses a box of any aspect every
-//! frame. This stage takes from each what it does best:
-//! - **where**: the filter's position (its peak is the track); the head's centre only moves
-//!   it, by `center_weight`, when the head is confident (`min_score`) and agrees with the
-//!   filter (`max_offset`);
-//! - **how large, what aspect**: the head's box, post-processed as NanoTrack does it (one
-//!   template of the initial frame, 127×127 context crop; a 255×255 search crop of twice
-//!   the context side; foreground probability × a penalty on scale and aspect change against
-//!   the previous box, `exp(−k·(r·s − 1))`, blended with a cosine window; the size moved
-//!   towards the chosen point's box at the rate `size_rate × penalty × score`), where the
-//!   rate starts from the scale filter's size instead of the previous box, so the scale
-//!   filter stays the prior and the fallback;
-//! - **fallback**: a low score, disagreement, a target below `min_side`, or no usable
-//!   output keep the scale filter's size and the filter's centre, as with `mode: none`.
+//! frame. This stage takes from each what it does best (docs/algorithm.md "Box refinement"
+//! says from whom):
+//! - **where**: the filter's position. The head's box is read *at* that position
+//!   (`read: filter`, the score-weighted box of the 3×3 grid points around the crop centre),
+//!   as ATOM/DiMP refine the box around the classifier's position; NanoTrack's own arg-max
+//!   over the whole crop (`read: peak`) can jump to a look-alike. The centre stays the
+//!   filter's unless `center_weight` > 0.
+//! - **how large, what aspect**: the head's box, moved towards at NanoTrack's rate
+//!   (`size_rate × penalty × score`, the penalty `exp(−k·(r·s − 1))` on scale and aspect
+//!   change), from the *prior*: the previous box moved by the scale filter's change this
+//!   frame, so the scale filter stays the prior and the fallback; each side changes by at most
+//!   `max_change` a frame (SiamRPN++/DSST-style smoothing against one bad regression).
+//! - **when**: the head's foreground probability at the filter's position ≥ `min_score`, its
+//!   box agrees with the prior (IoU ≥ `min_iou`, centre within `max_offset` target sizes), the
+//!   target's shorter side ≥ `min_side`, every `interval` tracked frames. Otherwise the
+//!   prior is kept.
+//! - **what it changes**: the reported box only (`feed_scale: false`), so the filter, its
+//!   window, the scale filter and the lost-state search run as with `mode: none`; or also the
+//!   filter's scale (`feed_scale: true`).
 //!
 //! The networks are [`NanoVerifier`]'s (plans optimised once per process and shared; one
-//! backbone and one head pass per tracked frame); the refiner has its own run state and
-//! its own template, taken at initialisation and never updated (NanoTrack's choice: a
-//! template that does not drift).
+//! backbone and one head pass per run); the refiner has its own template, taken at
+//! initialisation and never updated (NanoTrack's choice: a template that does not drift).
 
-use crate::config::{BoxRefineConfig, BoxRefineMode, TrackerSpec};
+use crate::config::{BoxPrior, BoxRead, BoxRefineConfig, BoxRefineMode, TrackerSpec};
 use crate::error::TrackError;
 use crate::geometry::{BBox, Point2, Size2};
 use crate::image::Frame;
@@ -128,6 +133,84 @@ pub fn select(
     })
 }
 
+/// Largest per-side calibration factor (and smallest, inverted) the initial frame may set:
+/// beyond ×1.5 the head and the given box do not describe the same object's extent.
+const MAX_CALIBRATION: f32 = 1.5;
+
+/// Grid points on each side of the crop centre that [`read_at`] averages (1: 3×3).
+const READ_RADIUS: usize = 1;
+
+/// The head's box read at the crop centre (the filter's position): the foreground-probability
+/// weighted mean of the boxes (left/top/right/bottom corners) regressed at the
+/// `(2·READ_RADIUS+1)²` grid points around it, in frame pixels on a crop of `scale_z` crop
+/// pixels per frame pixel; its score is the mean probability there and its penalty
+/// NanoTrack's against `prior`. Unlike [`select`], a look-alike elsewhere in the crop cannot
+/// take the box: every point read lies within a quarter of the target's context of the
+/// filter's position. `None` for maps of the wrong length, a degenerate `prior` or
+/// `scale_z`, or no finite positive-size box there.
+pub fn read_at(
+    margins: &[f32],
+    loc: &[f32],
+    prior: Size2,
+    scale_z: f32,
+    cfg: &BoxRefineConfig,
+) -> Option<HeadBox> {
+    let n = SEARCH_CELLS * SEARCH_CELLS;
+    if margins.len() != n || loc.len() != 4 * n {
+        return None;
+    }
+    if !(prior.w > 0.0 && prior.h > 0.0 && scale_z > 0.0 && scale_z.is_finite()) {
+        return None;
+    }
+    let c = SEARCH_CELLS / 2;
+    let (mut wsum, mut psum, mut count) = (0.0f32, 0.0f32, 0usize);
+    let mut acc = [0.0f32; 4];
+    for j in c - READ_RADIUS..=c + READ_RADIUS {
+        for k in c - READ_RADIUS..=c + READ_RADIUS {
+            let i = j * SEARCH_CELLS + k;
+            let (l, t, r, b) = (loc[i], loc[n + i], loc[2 * n + i], loc[3 * n + i]);
+            let ok = [l, t, r, b, margins[i]].iter().all(|v| v.is_finite());
+            if !(ok && l + r > 0.0 && t + b > 0.0) {
+                continue;
+            }
+            let p = 1.0 / (1.0 + (-margins[i]).exp());
+            let (px, py) = (
+                (k as f32 - c as f32) * STRIDE,
+                (j as f32 - c as f32) * STRIDE,
+            );
+            acc[0] += p * (px - l);
+            acc[1] += p * (py - t);
+            acc[2] += p * (px + r);
+            acc[3] += p * (py + b);
+            wsum += p;
+            psum += p;
+            count += 1;
+        }
+    }
+    if count == 0 || wsum <= 0.0 {
+        return None;
+    }
+    let [x1, y1, x2, y2] = acc.map(|v| v / wsum);
+    let (w, h) = (x2 - x1, y2 - y1);
+    let (pw, ph) = (prior.w * scale_z, prior.h * scale_z);
+    let (s_c, r_c) = (change(sz(w, h) / sz(pw, ph)), change((pw / ph) / (w / h)));
+    let penalty = (-(r_c * s_c - 1.0) * cfg.penalty_k).exp();
+    let hb = HeadBox {
+        dx: 0.5 * (x1 + x2) / scale_z,
+        dy: 0.5 * (y1 + y2) / scale_z,
+        size: Size2 {
+            w: w / scale_z,
+            h: h / scale_z,
+        },
+        score: psum / count as f32,
+        penalty,
+    };
+    let finite = [hb.dx, hb.dy, hb.size.w, hb.size.h, hb.penalty]
+        .iter()
+        .all(|v| v.is_finite());
+    (finite && hb.size.w > 0.0 && hb.size.h > 0.0).then_some(hb)
+}
+
 /// What the stage decided for one frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Refined {
@@ -135,40 +218,67 @@ pub struct Refined {
     pub pos: Point2,
     /// Box size, frame pixels.
     pub size: Size2,
-    /// The head's box was taken (false: the filter's centre and the fallback size).
+    /// The head's box was taken (false: the filter's centre and the prior size).
     pub taken: bool,
-    /// The head's foreground probability at its chosen point (0 when it did not run).
+    /// The head's foreground probability where its box was read (0 when it did not run).
     pub score: f32,
 }
 
-/// Fuses the head's box with the filter's (`fallback` size, `filter_pos` centre) under the
-/// gates of `cfg`; `prev` is the previous frame's box size (the search crop's scale and
-/// NanoTrack's penalty reference).
+/// IoU of two boxes given by centre and size.
+fn iou(a: Point2, sa: Size2, b: Point2, sb: Size2) -> f32 {
+    let ix = ((a.x + 0.5 * sa.w).min(b.x + 0.5 * sb.w) - (a.x - 0.5 * sa.w).max(b.x - 0.5 * sb.w))
+        .max(0.0);
+    let iy = ((a.y + 0.5 * sa.h).min(b.y + 0.5 * sb.h) - (a.y - 0.5 * sa.h).max(b.y - 0.5 * sb.h))
+        .max(0.0);
+    let inter = ix * iy;
+    let union = sa.w * sa.h + sb.w * sb.h - inter;
+    if union > 0.0 {
+        inter / union
+    } else {
+        0.0
+    }
+}
+
+/// Fuses the head's box with the filter's (`filter_pos` centre, `prior` size: the previous
+/// box moved by the scale filter's change) under the gates of `cfg`: the head must be
+/// confident (`min_score`), near (`max_offset` target sizes) and overlapping (`min_iou`);
+/// then the size moves towards the head's at `size_rate × penalty × score`, each side by at
+/// most `max_change`, and the centre by `center_weight`.
 pub fn fuse(
     hb: Option<HeadBox>,
     filter_pos: Point2,
-    prev: Size2,
-    fallback: Size2,
+    prior: Size2,
     cfg: &BoxRefineConfig,
 ) -> Refined {
     let keep = Refined {
         pos: filter_pos,
-        size: fallback,
+        size: prior,
         taken: false,
         score: hb.map_or(0.0, |h| h.score),
     };
     let Some(h) = hb else {
         return keep;
     };
-    let target = (prev.w * prev.h).sqrt();
+    let target = (prior.w * prior.h).sqrt();
     let offset = (h.dx * h.dx + h.dy * h.dy).sqrt() / target;
-    if !(h.score >= cfg.min_score && offset <= cfg.max_offset && target > 0.0) {
+    let head_pos = Point2 {
+        x: filter_pos.x + h.dx,
+        y: filter_pos.y + h.dy,
+    };
+    let overlap = iou(head_pos, h.size, filter_pos, prior);
+    if !(h.score >= cfg.min_score
+        && offset <= cfg.max_offset
+        && overlap >= cfg.min_iou
+        && target > 0.0)
+    {
         return keep;
     }
     let lr = (h.penalty * h.score * cfg.size_rate).clamp(0.0, 1.0);
+    let step = 1.0 + cfg.max_change;
+    let side = |p: f32, t: f32| (p * (1.0 - lr) + t * lr).clamp(p / step, p * step);
     let size = Size2 {
-        w: fallback.w * (1.0 - lr) + h.size.w * lr,
-        h: fallback.h * (1.0 - lr) + h.size.h * lr,
+        w: side(prior.w, h.size.w),
+        h: side(prior.h, h.size.h),
     };
     let pos = Point2 {
         x: filter_pos.x + cfg.center_weight * h.dx,
@@ -192,6 +302,11 @@ pub struct BoxRefiner {
     net: NanoVerifier,
     cfg: BoxRefineConfig,
     window: Vec<f32>,
+    /// Tracked frames seen since the template was set (the `interval` counter).
+    frames: usize,
+    /// Per-side factors (w, h) from the head's box to the initial box's extent
+    /// (`calibrate`; 1 without).
+    calib: (f32, f32),
 }
 
 impl BoxRefiner {
@@ -228,7 +343,20 @@ impl BoxRefiner {
             net,
             cfg: c.box_refine.clone(),
             window: cosine_window(),
+            frames: 0,
+            calib: (1.0, 1.0),
         }))
+    }
+
+    /// Whether the head's size also sets the filter's scale (`feed_scale`).
+    pub fn feeds_scale(&self) -> bool {
+        self.cfg.feed_scale
+    }
+
+    /// Whether the head's box is blended into the filter's own box (`prior: filter`)
+    /// rather than the previous box.
+    pub fn from_filter(&self) -> bool {
+        self.cfg.prior == BoxPrior::Filter
     }
 
     /// Takes the template from `bbox` on the initial frame.
@@ -236,12 +364,56 @@ impl BoxRefiner {
     /// # Errors
     /// A network error.
     pub fn set_template(&mut self, frame: &Frame<'_>, bbox: BBox) -> Result<(), TrackError> {
-        self.net.set_template(frame, bbox.center(), bbox.w, bbox.h)
+        self.frames = 0;
+        self.calib = (1.0, 1.0);
+        self.net
+            .set_template(frame, bbox.center(), bbox.w, bbox.h)?;
+        // Calibration: the given box defines the target's extent; the head's own idea of it
+        // (a building with its surroundings, a rider with the board) is a per-object bias
+        // that the per-side ratio on the initial frame removes from every later box.
+        let size = Size2 {
+            w: bbox.w,
+            h: bbox.h,
+        };
+        if self.cfg.calibrate && size.w.min(size.h) >= self.cfg.min_side {
+            if let Some(hb) = self.head_box(frame, bbox.center(), size, BoxRead::Filter)? {
+                let (cw, ch) = (size.w / hb.size.w, size.h / hb.size.h);
+                let lim = |c: f32| c.clamp(1.0 / MAX_CALIBRATION, MAX_CALIBRATION);
+                if cw.is_finite() && ch.is_finite() && cw > 0.0 && ch > 0.0 {
+                    self.calib = (lim(cw), lim(ch));
+                }
+            }
+        }
+        Ok(())
     }
 
-    /// This frame's box: the head runs on a search crop at `filter_pos` sized from `prev`
-    /// (the previous box), and [`fuse`] decides between its box and the filter's
-    /// (`filter_pos`, `fallback`).
+    /// The head's box on a search crop at `pos` sized from `prior` (frame pixels), read as
+    /// `read` says, uncalibrated. `None` when the crop or the maps give nothing usable.
+    fn head_box(
+        &mut self,
+        frame: &Frame<'_>,
+        pos: Point2,
+        prior: Size2,
+        read: BoxRead,
+    ) -> Result<Option<HeadBox>, TrackError> {
+        let s_z = sz(prior.w, prior.h);
+        if !(s_z.is_finite() && s_z > 0.0) {
+            return Ok(None);
+        }
+        let s_x = s_z * SEARCH_SIDE as f32 / TEMPLATE_SIDE as f32;
+        let Some((margins, loc)) = self.net.score_maps(frame, pos, s_x)? else {
+            return Ok(None);
+        };
+        let scale_z = TEMPLATE_SIDE as f32 / s_z;
+        Ok(match read {
+            BoxRead::Filter => read_at(&margins, &loc, prior, scale_z, &self.cfg),
+            BoxRead::Peak => select(&margins, &loc, prior, scale_z, &self.cfg, &self.window),
+        })
+    }
+
+    /// This frame's box: the head runs (every `interval` calls) on a search crop at
+    /// `filter_pos` sized from `prior` (the previous box moved by the scale filter's
+    /// change), and [`fuse`] decides between its box and the prior.
     ///
     /// # Errors
     /// A network error.
@@ -249,24 +421,34 @@ impl BoxRefiner {
         &mut self,
         frame: &Frame<'_>,
         filter_pos: Point2,
-        prev: Size2,
-        fallback: Size2,
+        prior: Size2,
     ) -> Result<Refined, TrackError> {
-        let skip = fuse(None, filter_pos, prev, fallback, &self.cfg);
-        if prev.w.min(prev.h) < self.cfg.min_side || !self.net.has_template() {
+        let skip = fuse(None, filter_pos, prior, &self.cfg);
+        let due = self.frames.is_multiple_of(self.cfg.interval.max(1));
+        self.frames = self.frames.wrapping_add(1);
+        if !due || prior.w.min(prior.h) < self.cfg.min_side || !self.net.has_template() {
             return Ok(skip);
         }
-        let s_z = sz(prev.w, prev.h);
-        if !(s_z.is_finite() && s_z > 0.0) {
-            return Ok(skip);
-        }
-        let s_x = s_z * SEARCH_SIDE as f32 / TEMPLATE_SIDE as f32;
-        let Some((margins, loc)) = self.net.score_maps(frame, filter_pos, s_x)? else {
-            return Ok(skip);
+        // The prior in the head's units, so that NanoTrack's penalty compares like with like;
+        // the head's box back in the initial box's units.
+        let (cw, ch) = self.calib;
+        let head_prior = Size2 {
+            w: prior.w / cw,
+            h: prior.h / ch,
         };
-        let scale_z = TEMPLATE_SIDE as f32 / s_z;
-        let hb = select(&margins, &loc, prev, scale_z, &self.cfg, &self.window);
-        Ok(fuse(hb, filter_pos, prev, fallback, &self.cfg))
+        let hb = self
+            .head_box(frame, filter_pos, head_prior, self.cfg.read)?
+            .map(|h| HeadBox {
+                dx: h.dx,
+                dy: h.dy,
+                size: Size2 {
+                    w: h.size.w * cw,
+                    h: h.size.h * ch,
+                },
+                ..h
+            });
+        let out = fuse(hb, filter_pos, prior, &self.cfg);
+        Ok(out)
     }
 }
 
@@ -328,25 +510,109 @@ mod tests {
 
     #[test]
     fn fuse_takes_a_confident_agreeing_box_and_falls_back_otherwise() {
-        let c = cfg();
+        let c = BoxRefineConfig {
+            center_weight: 0.5,
+            ..cfg()
+        };
         let p = Point2 { x: 100.0, y: 100.0 };
-        let prev = Size2 { w: 20.0, h: 20.0 };
+        let prior = Size2 { w: 20.0, h: 20.0 };
         let hb = HeadBox {
             dx: 4.0,
             dy: 0.0,
-            size: Size2 { w: 40.0, h: 20.0 },
+            size: Size2 { w: 24.0, h: 20.0 },
             score: 0.9,
             penalty: 1.0,
         };
-        let r = fuse(Some(hb), p, prev, prev, &c);
+        let r = fuse(Some(hb), p, prior, &c);
         assert!(r.taken);
         assert!(r.size.w > 20.0 && r.size.h == 20.0, "{r:?}");
         assert!((r.pos.x - 102.0).abs() < 1e-4);
-        // Unconfident, far away: the filter's box.
-        for bad in [HeadBox { score: 0.3, ..hb }, HeadBox { dx: 15.0, ..hb }] {
-            let r = fuse(Some(bad), p, prev, prev, &c);
-            assert!(!r.taken && r.pos == p && r.size == prev, "{r:?}");
+        // Unconfident, far away, not overlapping: the prior.
+        let tiny = HeadBox {
+            size: Size2 { w: 6.0, h: 6.0 },
+            dx: 0.0,
+            ..hb
+        };
+        for bad in [
+            HeadBox { score: 0.3, ..hb },
+            HeadBox { dx: 15.0, ..hb },
+            tiny,
+        ] {
+            let r = fuse(Some(bad), p, prior, &c);
+            assert!(!r.taken && r.pos == p && r.size == prior, "{bad:?} {r:?}");
         }
-        assert!(!fuse(None, p, prev, prev, &c).taken);
+        assert!(!fuse(None, p, prior, &c).taken);
+    }
+
+    #[test]
+    fn fuse_keeps_the_filter_centre_by_default_and_limits_the_change_per_frame() {
+        let c = cfg();
+        let p = Point2 { x: 100.0, y: 100.0 };
+        let prior = Size2 { w: 40.0, h: 40.0 };
+        // A confident head box twice as wide (IoU 0.5 with the prior: just accepted).
+        let hb = HeadBox {
+            dx: 1.0,
+            dy: 0.0,
+            size: Size2 { w: 80.0, h: 40.0 },
+            score: 1.0,
+            penalty: 1.0,
+        };
+        let r = fuse(Some(hb), p, prior, &c);
+        assert!(r.taken, "{r:?}");
+        assert_eq!(r.pos, p, "center_weight 0: the filter's centre");
+        // Rate 0.39 would give 55.6 px; max_change 0.1 caps it at 44.
+        assert!((r.size.w - 44.0).abs() < 1e-3 && r.size.h == 40.0, "{r:?}");
+        let loose = BoxRefineConfig {
+            max_change: 1.0,
+            ..c.clone()
+        };
+        let r = fuse(Some(hb), p, prior, &loose);
+        assert!((r.size.w - 55.6).abs() < 1e-3, "{r:?}");
+    }
+
+    #[test]
+    fn read_at_takes_the_box_at_the_filter_position_not_a_brighter_look_alike() {
+        // The target (a 40×20 crop-pixel box) at the centre with a moderate score, a
+        // look-alike (the same box) two cells right with a higher one.
+        let (mut m, loc) = maps(8, 8, 40.0, 20.0);
+        m[8 * SEARCH_CELLS + 8] = 0.5;
+        m[8 * SEARCH_CELLS + 10] = 8.0;
+        let prior = Size2 { w: 20.0, h: 10.0 };
+        let w = cosine_window();
+        let peak = select(&m, &loc, prior, 2.0, &cfg(), &w).unwrap();
+        assert!(peak.dx > 10.0, "the arg-max takes the look-alike: {peak:?}");
+        let at = read_at(&m, &loc, prior, 2.0, &cfg()).unwrap();
+        assert!(at.dx.abs() < 1e-3 && at.dy.abs() < 1e-3, "{at:?}");
+        assert!(
+            (at.size.w - 20.0).abs() < 1e-3 && (at.size.h - 10.0).abs() < 1e-3,
+            "{at:?}"
+        );
+        // Mean probability over the 3×3 points: one at sigmoid(0.5), eight at sigmoid(−6).
+        let expect = (1.0 / (1.0 + (-0.5f32).exp()) + 8.0 / (1.0 + 6.0f32.exp())) / 9.0;
+        assert!((at.score - expect).abs() < 1e-4, "{}", at.score);
+        assert!(
+            (at.penalty - 1.0).abs() < 1e-4,
+            "same size and aspect as the prior"
+        );
+    }
+
+    #[test]
+    fn read_at_weights_the_points_by_their_probability_and_refuses_bad_maps() {
+        // Two confident points around the centre regress different boxes: the mean of
+        // their corners, the background points' (probability ~0.0025) nearly nothing.
+        let (mut m, mut loc) = maps(8, 8, 40.0, 40.0);
+        m[7 * SEARCH_CELLS + 8] = 6.0;
+        let i = 7 * SEARCH_CELLS + 8;
+        // The point one cell up (16 px) regresses a box 8 px taller at the bottom.
+        loc[N + i] = 20.0 - 16.0;
+        loc[3 * N + i] = 20.0 + 16.0 + 8.0;
+        let hb = read_at(&m, &loc, Size2 { w: 20.0, h: 20.0 }, 1.0, &cfg()).unwrap();
+        assert!((hb.size.w - 40.0).abs() < 0.1, "{hb:?}");
+        assert!(hb.size.h > 43.5 && hb.size.h < 44.5, "{hb:?}");
+        let s = Size2 { w: 20.0, h: 20.0 };
+        assert!(read_at(&m[1..], &loc, s, 1.0, &cfg()).is_none());
+        assert!(read_at(&m, &loc, Size2 { w: 0.0, h: 1.0 }, 1.0, &cfg()).is_none());
+        assert!(read_at(&m, &loc, s, f32::INFINITY, &cfg()).is_none());
+        assert!(read_at(&m, &vec![f32::NAN; 4 * N], s, 1.0, &cfg()).is_none());
     }
 }

@@ -469,13 +469,13 @@ pub struct BoxRefineConfig {
     /// tracked frame (pure Rust); `nanotrack_ort`: the same on ONNX Runtime (cargo feature
     /// `cnn`). The networks are `redetection.verifier_backbone` / `verifier_head`.
     pub mode: BoxRefineMode,
-    /// Head foreground probability at or above which its box is taken (else the scale
-    /// filter's size is kept).
+    /// Head foreground probability at or above which its box is taken (else the prior is
+    /// kept).
     pub min_score: f32,
     /// Largest distance between the head's and the filter's box centres, in target sizes
     /// (√(w·h)), for the head's box to be taken.
     pub max_offset: f32,
-    /// Targets whose shorter side is below this (pixels) keep the filter's box.
+    /// Targets whose shorter side is below this (pixels) keep the prior box.
     pub min_side: f32,
     /// Weight of the head's centre against the filter's when the head's box is taken (0:
     /// the filter's centre, 1: the head's).
@@ -486,6 +486,50 @@ pub struct BoxRefineConfig {
     pub window_influence: f32,
     /// NanoTrack's size learning rate (times the chosen point's penalised score).
     pub size_rate: f32,
+    /// Where the head's box is read: `filter` (at the filter's position, ATOM/DiMP's
+    /// division of labour) or `peak` (NanoTrack's penalised, windowed arg-max).
+    pub read: BoxRead,
+    /// Smallest IoU between the head's box and the filter's (filter centre, current box
+    /// size) for the head's box to be taken (0: no IoU gate).
+    pub min_iou: f32,
+    /// Largest relative change of the box's width or height in one frame from the head
+    /// (0.1: at most ×1.1 or ÷1.1).
+    pub max_change: f32,
+    /// The head's size also sets the filter's scale (its window and the scale filter's
+    /// next estimate); `false`: it sets only the reported box.
+    pub feed_scale: bool,
+    /// What the head's box is blended into each frame: `box` (the previous box moved by
+    /// the scale filter: the head's corrections accumulate, NanoTrack's smoothing) or
+    /// `filter` (the filter's own box: a per-frame fusion of the two size estimates).
+    pub prior: BoxPrior,
+    /// Calibrate the head to the initial box: the per-side ratio of the given box to the
+    /// head's box on the initial frame scales every later head box.
+    pub calibrate: bool,
+    /// Run the head every this many tracked frames (1: every frame); between runs the box
+    /// follows the scale filter with the last correction.
+    pub interval: usize,
+}
+
+/// What [`crate::box_refine`] blends the head's box into.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BoxPrior {
+    /// The previous box moved by the scale filter's change (corrections accumulate).
+    #[default]
+    Box,
+    /// The filter's own box (first frame's aspect, the scale filter's size).
+    Filter,
+}
+
+/// Where [`crate::box_refine`] reads the head's box.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BoxRead {
+    /// The score-weighted box of the 3×3 grid points at the filter's position.
+    #[default]
+    Filter,
+    /// NanoTrack's choice: the arg-max of the penalised score map with its cosine window.
+    Peak,
 }
 
 /// The box refinement stage (`box_refine.mode`).
@@ -508,10 +552,17 @@ impl Default for BoxRefineConfig {
             min_score: 0.5,
             max_offset: 0.5,
             min_side: 20.0,
-            center_weight: 0.5,
+            center_weight: 0.0,
             penalty_k: 0.148,
             window_influence: 0.462,
             size_rate: 0.39,
+            read: BoxRead::Filter,
+            min_iou: 0.5,
+            max_change: 0.1,
+            feed_scale: false,
+            prior: BoxPrior::Box,
+            calibrate: true,
+            interval: 1,
         }
     }
 }
@@ -805,6 +856,9 @@ impl TrackerConfig {
         float_key("box_refine.penalty_k", b.penalty_k)?;
         float_key("box_refine.window_influence", b.window_influence)?;
         float_key("box_refine.size_rate", b.size_rate)?;
+        float_key("box_refine.min_iou", b.min_iou)?;
+        float_key("box_refine.max_change", b.max_change)?;
+        int_key("box_refine.interval", b.interval)?;
         int_key("threads", self.threads)?;
         Ok(TrackerSpec {
             config: self.clone(),

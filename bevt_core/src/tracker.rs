@@ -296,6 +296,10 @@ struct State {
     /// is `base_target.w · scale · aspect` by `base_target.h · scale / aspect`, so `scale`
     /// stays its area's and the filter's window follows it; 1 without the stage.
     aspect: f32,
+    /// Size factor of the reported box against the filter's (`box_refine` with
+    /// `feed_scale: false`): the box is `box_size(scale)` times this on both sides, the
+    /// filter's scale stays its own; 1 without the stage.
+    size_factor: f32,
     min_scale: f32,
     max_scale: f32,
     confidence: ConfidenceModel,
@@ -309,14 +313,15 @@ impl State {
     /// The reported box size at `scale` with the current aspect factor, frame pixels.
     fn box_size(&self, scale: f32) -> Size2 {
         Size2 {
-            w: self.geo.base_target.w * scale * self.aspect,
-            h: self.geo.base_target.h * scale / self.aspect,
+            w: self.geo.base_target.w * scale * self.size_factor * self.aspect,
+            h: self.geo.base_target.h * scale * self.size_factor / self.aspect,
         }
     }
 
-    /// Takes the box refinement stage's box: centre, and scale and aspect factor from its
-    /// size (each clamped to its limits).
-    fn take_box(&mut self, pos: Point2, size: Size2) {
+    /// Takes the box refinement stage's box: centre, and aspect factor and either the
+    /// filter's scale (`feed_scale`) or the reported box's size factor from its size (each
+    /// clamped to its limits).
+    fn take_box(&mut self, pos: Point2, size: Size2, feed_scale: bool) {
         if pos.x.is_finite() && pos.y.is_finite() {
             self.pos = Point2 {
                 x: pos.x.clamp(0.0, self.frame_w as f32),
@@ -327,7 +332,15 @@ impl State {
         let scale = (size.w * size.h / (b.w * b.h)).sqrt();
         let aspect = ((size.w / size.h) / (b.w / b.h)).sqrt();
         if scale.is_finite() && scale > 0.0 && aspect.is_finite() && aspect > 0.0 {
-            self.scale = scale.clamp(self.min_scale, self.max_scale);
+            if feed_scale {
+                self.scale = scale.clamp(self.min_scale, self.max_scale);
+                self.size_factor = 1.0;
+            } else {
+                let f = scale / self.scale;
+                if f.is_finite() && f > 0.0 {
+                    self.size_factor = f.clamp(1.0 / MAX_ASPECT_FACTOR, MAX_ASPECT_FACTOR);
+                }
+            }
             self.aspect = aspect.clamp(1.0 / MAX_ASPECT_FACTOR, MAX_ASPECT_FACTOR);
         }
     }
@@ -756,6 +769,7 @@ impl BevtTracker {
             pos: b.center(),
             scale,
             aspect: 1.0,
+            size_factor: 1.0,
             min_scale: min_scale.min(scale),
             max_scale: max_scale.max(scale),
             frame_w: frame.width(),
@@ -902,9 +916,11 @@ impl Tracker for BevtTracker {
             });
         }
         if st.states.state() == TrackState::Lost {
+            // The head's correction is stale after a loss: the box restarts from the filter's.
+            st.aspect = 1.0;
+            st.size_factor = 1.0;
             return lost::search(st, frame, &self.spec, self.verifier.as_deref_mut());
         }
-        let prev_size = st.box_size(st.scale);
         // Detection over all scales around the previous position.
         let side = st.geo.patch_side as f32;
         let fmin = st.factors.iter().copied().fold(f32::INFINITY, f32::min);
@@ -950,13 +966,18 @@ impl Tracker for BevtTracker {
             let change = sf.estimate(frame, st.pos, size)?;
             st.scale = (st.scale * change).clamp(st.min_scale, st.max_scale);
         }
-        // The learned box on the filter (box_refine): the head's size and aspect, the
-        // filter's centre unless the head is confident and agrees; else as it was.
+        // The learned box on the filter (box_refine): the head's size and aspect read at the
+        // filter's position, blended into the prior (the previous box moved by the scale
+        // filter) when the head is confident and agrees; else the prior.
         if let Some(r) = self.refiner.as_mut() {
-            let fallback = st.box_size(st.scale);
-            let refined = r.refine(frame, st.pos, prev_size, fallback)?;
+            let prior = if r.from_filter() {
+                st.target_size()
+            } else {
+                st.box_size(st.scale)
+            };
+            let refined = r.refine(frame, st.pos, prior)?;
             if refined.taken {
-                st.take_box(refined.pos, refined.size);
+                st.take_box(refined.pos, refined.size, r.feeds_scale());
             }
         }
 
@@ -1260,21 +1281,47 @@ mod tests {
 
     /// Per-frame IoU with the truth and the last box, tracking all of `seq`.
     fn ious(seq: &SynthParams, cfg: &TrackerConfig) -> (Vec<f32>, BBox) {
-        let mut t = started(seq, cfg);
-        let mut out = Vec::new();
-        let mut last = seq.truth(0);
-        for i in 1..seq.frames {
-            let f = seq.frame(i);
-            let frame = Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
-            let o = t.update(&frame).unwrap();
-            assert!(
-                o.bbox.is_finite() && o.bbox.w >= 1.0 && o.bbox.h >= 1.0,
-                "{o:?}"
-            );
-            out.push(o.bbox.iou(&f.truth));
-            last = o.bbox;
-        }
-        (out, last)
+        let boxes = boxes(seq, cfg, None);
+        let out = boxes
+            .iter()
+            .enumerate()
+            .map(|(i, b)| b.iou(&seq.truth(i + 1)))
+            .collect();
+        (out, boxes[boxes.len() - 1])
+    }
+
+    /// The boxes of frames 1.. of `seq`, with a copy of the initial target pasted beside
+    /// the target on every frame when `lookalike` gives the spacing in target widths.
+    fn boxes(seq: &SynthParams, cfg: &TrackerConfig, lookalike: Option<f32>) -> Vec<BBox> {
+        use crate::eval::perturb::Perturbation;
+        let p = lookalike
+            .map(|k| Perturbation::parse(&format!("lookalike={k}")).unwrap())
+            .unwrap_or_default()
+            .for_sequence("synth");
+        let (w, h) = (seq.width, seq.height);
+        let f0 = seq.frame(0);
+        let patch = p.cut_patch(&f0.rgb, w, h, f0.truth).unwrap();
+        let mut rgb0 = f0.rgb.clone();
+        p.paste_lookalike(&mut rgb0, w, h, f0.truth, &patch);
+        let mut t = BevtTracker::new(cfg.validate().unwrap());
+        t.init(
+            &Frame::packed(&rgb0, w, h, PixelFormat::Rgb8).unwrap(),
+            f0.truth,
+        )
+        .unwrap();
+        (1..seq.frames)
+            .map(|i| {
+                let mut f = seq.frame(i);
+                p.paste_lookalike(&mut f.rgb, w, h, f.truth, &patch);
+                let frame = Frame::packed(&f.rgb, w, h, PixelFormat::Rgb8).unwrap();
+                let o = t.update(&frame).unwrap();
+                assert!(
+                    o.bbox.is_finite() && o.bbox.w >= 1.0 && o.bbox.h >= 1.0,
+                    "{o:?}"
+                );
+                o.bbox
+            })
+            .collect()
     }
 
     fn mean(v: &[f32]) -> f32 {
@@ -1295,8 +1342,9 @@ mod tests {
         let (box_ref, last) = ious(&seq, &refined(&cfg));
         let truth = seq.truth(seq.frames - 1);
         let ratio = |b: &BBox| (b.w / b.h) / (truth.w / truth.h);
-        // Measured: 0.71 of the truth's aspect with the stage, 0.50 without (the
-        // filter's box never changes aspect); the size smoothing keeps it behind.
+        // Measured: 0.75 of the truth's aspect with the stage, 0.50 without (the
+        // filter's box never changes aspect); last-15 mean IoU 0.79 against 0.57. The
+        // size smoothing keeps it behind.
         assert!(
             ratio(&last) > 0.62 && ratio(&last) < 1.4,
             "aspect {} of the truth's (filter alone {})",
@@ -1313,10 +1361,85 @@ mod tests {
     }
 
     #[test]
+    fn box_refine_leaves_the_filter_track_alone_and_changes_only_the_box() {
+        // feed_scale false, center_weight 0 (the defaults): every box centre is the
+        // filter's, so precision is mode none's by construction; only sizes differ.
+        let seq = SynthParams {
+            frames: 30,
+            scale_rate: 1.0,
+            aspect_rate: 2f32.powf(1.0 / 29.0),
+            ..SynthParams::default()
+        };
+        let cfg = TrackerConfig::default();
+        let plain = boxes(&seq, &cfg, None);
+        let refined_boxes = boxes(&seq, &refined(&cfg), None);
+        for (a, b) in plain.iter().zip(&refined_boxes) {
+            let (ca, cb) = (a.center(), b.center());
+            assert!(
+                (ca.x - cb.x).abs() < 1e-3 && (ca.y - cb.y).abs() < 1e-3,
+                "{a:?} {b:?}"
+            );
+        }
+        assert!(plain
+            .iter()
+            .zip(&refined_boxes)
+            .any(|(a, b)| (a.w - b.w).abs() > 1.0));
+        // With the head's size fed to the filter's scale, the track itself changes.
+        let mut fed = refined(&cfg);
+        fed.box_refine.feed_scale = true;
+        fed.box_refine.center_weight = 0.5;
+        let fed_boxes = boxes(&seq, &fed, None);
+        assert!(plain
+            .iter()
+            .zip(&fed_boxes)
+            .any(|(a, b)| (a.center().x - b.center().x).abs() > 1e-3));
+    }
+
+    #[test]
+    fn box_refine_does_not_jump_to_a_look_alike_beside_the_target() {
+        // A copy of the target 1.5 widths to its right on every frame: the box keeps the
+        // filter's centre and its size changes by at most max_change a frame. Measured:
+        // mean IoU 0.957 against the filter alone's 0.976 (the head's box of this synthetic
+        // texture is a little loose; without calibration it cost 0.033).
+        let seq = SynthParams {
+            frames: 30,
+            scale_rate: 1.0,
+            path_amplitude: (20.0, 20.0),
+            ..SynthParams::default()
+        };
+        let cfg = TrackerConfig::default();
+        let on = refined(&cfg);
+        let plain = boxes(&seq, &cfg, Some(1.5));
+        let with = boxes(&seq, &on, Some(1.5));
+        let step = 1.0 + on.box_refine.max_change + 1e-3;
+        for w in with.windows(2) {
+            let (rw, rh) = (w[1].w / w[0].w, w[1].h / w[0].h);
+            assert!(
+                rw.max(1.0 / rw) <= step && rh.max(1.0 / rh) <= step,
+                "{w:?}"
+            );
+        }
+        let iou = |b: &[BBox]| {
+            mean(
+                &b.iter()
+                    .enumerate()
+                    .map(|(i, x)| x.iou(&seq.truth(i + 1)))
+                    .collect::<Vec<_>>(),
+            )
+        };
+        assert!(iou(&with) > 0.6, "mean IoU {}", iou(&with));
+        assert!(
+            iou(&with) >= iou(&plain) - 0.03,
+            "mean IoU {} vs filter alone {}",
+            iou(&with),
+            iou(&plain)
+        );
+    }
+
+    #[test]
     fn box_refine_keeps_up_with_a_fast_size_change() {
-        // ×2.7 in 50 frames (2 % a frame). On this texture the scale filter alone does
-        // better (mean IoU 0.974 against 0.940 measured): the head's box is noisier here;
-        // the test bounds that cost and the final size.
+        // ×2.7 in 50 frames (2 % a frame). Measured: mean IoU 0.974 with and without the
+        // stage, final size 1.03 of the truth's; the test bounds the cost and the size.
         let seq = SynthParams {
             frames: 50,
             target: (30.0, 24.0),
@@ -1330,7 +1453,7 @@ mod tests {
         let area = (last.w * last.h / (truth.w * truth.h)).sqrt();
         assert!((area - 1.0).abs() < 0.2, "size {area} of the truth's");
         assert!(
-            mean(&box_ref) > mean(&plain) - 0.05,
+            mean(&box_ref) > mean(&plain) - 0.02,
             "mean IoU {} vs filter alone {}",
             mean(&box_ref),
             mean(&plain)
@@ -1349,13 +1472,19 @@ mod tests {
         let cfg = TrackerConfig::default();
         let (plain, _) = ious(&seq, &cfg);
         // `box_refine.min_side` (20 px) makes the stage step aside: the same boxes. With
-        // `min_side: 0` the head costs 0.026 mean IoU here (0.910 against 0.936 measured).
+        // `min_side: 0` the head costs 0.006 mean IoU here (0.930 against 0.936 measured).
         let (box_ref, _) = ious(&seq, &refined(&cfg));
         assert_eq!(box_ref, plain);
         let mut on = refined(&cfg);
         on.box_refine.min_side = 0.0;
         let (forced, _) = ious(&seq, &on);
         assert_ne!(forced, plain, "the head runs below min_side when told to");
+        assert!(
+            mean(&forced) >= mean(&plain) - 0.02,
+            "forced: mean IoU {} vs filter alone {}",
+            mean(&forced),
+            mean(&plain)
+        );
         assert!(
             mean(&box_ref) >= mean(&plain) - 0.02,
             "mean IoU {} vs filter alone {}",
