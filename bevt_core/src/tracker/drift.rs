@@ -43,12 +43,13 @@ pub(super) type Report = (TrackState, StateReason, f32);
 /// The verifier's best score around the box (`None`: no template, nothing to witness):
 /// the score alone, no box regression.
 fn score_at_box(
-    st: &State,
+    st: &mut State,
     frame: &Frame<'_>,
     v: &mut (dyn Verifier + 'static),
 ) -> Result<Option<f32>, TrackError> {
     let size = st.target_size();
     let side = 2.0 * context_side(size.w, size.h);
+    st.verifier_passes += 1;
     Ok(v.search_above(frame, st.pos, side, f32::INFINITY)?
         .map(|s| s.score()))
 }

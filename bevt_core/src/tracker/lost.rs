@@ -262,6 +262,7 @@ fn verify(
     // needed (`followed` drops the candidate, `offer` ignores the hit; the head's outputs
     // are checked finite, so a score is never NaN).
     if let Some(c) = st.lost.vcand.current() {
+        st.verifier_passes += 1;
         let hit = v.search_above(frame, c.pos, 2.0 * verifier_side(st, c.scale), thr)?;
         match hit {
             Some(Scored::Hit(h)) => {
@@ -282,6 +283,7 @@ fn verify(
         };
         let scale = st.lost.scale_at_loss * w.scale;
         let side = 2.0 * verifier_side(st, scale);
+        st.verifier_passes += 1;
         if let Some(Scored::Hit(h)) = v.search_above(frame, w.center, side, thr)? {
             let scale = hit_scale(st, &h);
             st.lost.vcand.offer(h.pos, scale, h.score, thr);
