@@ -184,7 +184,9 @@ fn assert_kept_from(r: &[(bevt_core::TrackOutput, bevt_core::BBox)], back: usize
 /// `redetection.verifier: nanotrack` with the embedded NanoTrack v2 backbone and head: the
 /// target re-entering far away is re-acquired by the verifier's whole-frame tiles alone (the
 /// filter's proposals off) within 25 frames of its return (the tiles cycle over the frame in
-/// ~30 lost frames here), where without the verifier it is not re-acquired at all.
+/// ~30 lost frames here), where without the verifier it is not re-acquired at all. The
+/// passes it spends: at most `verifier_windows` on a lost frame, and one on each frame its
+/// candidate is being confirmed (the tiles are not swept while the candidate holds).
 #[test]
 fn nanotrack_verifier_reacquires_a_far_reentry_the_filter_alone_misses() {
     let seq = bevt_tests::scenes::far_reentry();
@@ -199,10 +201,34 @@ fn nanotrack_verifier_reacquires_a_far_reentry_the_filter_alone_misses() {
     cfg.redetection.verifier = VerifierKind::Nanotrack;
     cfg.redetection.verifier_backbone = String::new();
     cfg.redetection.verifier_head = String::new();
-    let (back, r) = reacquired_at(&seq, cfg);
+    let windows = cfg.redetection.verifier_windows as u64;
+    let confirm = cfg.redetection.reacquire_frames;
+    let run = bevt_tests::track_synthetic_passes(&seq, cfg, seq.truth(0));
+    let passes: Vec<u64> = run.iter().map(|x| x.2).collect();
+    let r: Vec<_> = run.into_iter().map(|(o, b, _)| (o, b)).collect();
+    let back = (50..seq.frames).find(|&t| r[t - 1].0.state == TrackState::Reacquired);
     println!("verifier: re-acquired at {back:?}");
     let back = back.expect("the verifier never re-acquired the target");
     assert_kept_from(&r, back);
+    for t in 1..back {
+        if r[t - 1].0.state == TrackState::Lost {
+            assert!(
+                passes[t - 1] <= windows,
+                "frame {t}: {} passes",
+                passes[t - 1]
+            );
+        }
+    }
+    // The candidate's first frame swept the tiles; the frames confirming it follow it alone.
+    let first = back + 1 - confirm;
+    assert!(
+        passes[first - 1] > 1,
+        "frame {first}: {}",
+        passes[first - 1]
+    );
+    for t in first + 1..=back {
+        assert_eq!(passes[t - 1], 1, "frame {t} confirms the candidate");
+    }
 }
 
 /// A verifier whose head file is missing is a clear error at init, naming the key.
