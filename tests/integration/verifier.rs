@@ -366,3 +366,49 @@ fn verifiers_share_optimised_plans_within_a_process() {
     assert!(NanoVerifier::new(&other, "").is_err());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The drift check's calm interval (`track_state.drift_calm_frames`): on a visible target
+/// whose checks score at least the re-acquisition bar, the checks come every
+/// `drift_calm_frames` instead of every `drift_check_frames` (fewer passes, every frame
+/// still `tracking`); once the target is hidden, the learning gate's refusals end the calm,
+/// so the hidden target is flagged within `drift_check_frames` (plus the verifier's one
+/// frame of latency), where a check left at the calm interval would come later.
+#[test]
+fn the_calm_drift_check_comes_back_as_soon_as_the_filter_falls() {
+    use bevt_core::eval::synth::SynthParams;
+    const HIDE: usize = 40;
+    let visible = SynthParams {
+        frames: 91,
+        ..SynthParams::default()
+    };
+    let mut cfg = TrackerConfig::default();
+    cfg.track_state.lost_threshold = 0.0;
+    cfg.track_state.drift_check_frames = 15;
+    let checks = |cfg: &TrackerConfig, seq: &SynthParams| {
+        let run = bevt_tests::track_synthetic_passes(seq, cfg.clone(), seq.truth(0));
+        let at: Vec<usize> = (1..=run.len()).filter(|&t| run[t - 1].2 > 0).collect();
+        (run, at)
+    };
+    cfg.track_state.drift_calm_frames = 0;
+    let (run, every15) = checks(&cfg, &visible);
+    assert!(run.iter().all(|x| x.0.state == TrackState::Tracking));
+    assert_eq!(every15, vec![1, 16, 31, 46, 61, 76], "{every15:?}");
+    cfg.track_state.drift_calm_frames = 30;
+    let (run, calm) = checks(&cfg, &visible);
+    assert!(run.iter().all(|x| x.0.state == TrackState::Tracking));
+    assert_eq!(calm, vec![1, 31, 61], "{calm:?}");
+
+    let hidden = SynthParams {
+        frames: 70,
+        hidden: Some((HIDE, 70)),
+        ..SynthParams::default()
+    };
+    let (run, at) = checks(&cfg, &hidden);
+    let flagged = (1..=run.len())
+        .find(|&t| run[t - 1].0.state != TrackState::Tracking)
+        .expect("the hidden target was never flagged");
+    assert!(
+        (HIDE..=HIDE + 16).contains(&flagged),
+        "flagged on frame {flagged}, checks on {at:?}"
+    );
+}
