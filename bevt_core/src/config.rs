@@ -1049,7 +1049,7 @@ mod tests {
                 k.name
             );
         }
-        assert_eq!(live_keys().count(), 22);
+        assert_eq!(live_keys().count(), 23);
     }
 
     #[test]
