@@ -348,6 +348,10 @@ pub struct TrackStateConfig {
     /// (`redetection.verifier`) scores the box against the first frame's template; 0 = off
     /// (also off without a verifier). One pass costs about one tracked frame.
     pub drift_check_frames: usize,
+    /// The drift check's interval while calm (the last check scored at least
+    /// `redetection.verifier_threshold` and the learning gate refused no frame since);
+    /// at most `drift_check_frames` = no lengthening.
+    pub drift_calm_frames: usize,
     /// Verifier score (logit margin) below which a drift check makes the state uncertain.
     pub drift_threshold: f32,
     /// After a failed drift check, the next one this many confident frames later; failing
@@ -365,6 +369,7 @@ impl Default for TrackStateConfig {
             lost_threshold: 0.3,
             lost_frames: 12,
             drift_check_frames: 15,
+            drift_calm_frames: 0,
             drift_threshold: 4.0,
             drift_recheck_frames: 3,
             verify_low_confidence: true,
@@ -830,6 +835,7 @@ impl TrackerConfig {
         float_key("track_state.lost_threshold", t.lost_threshold)?;
         int_key("track_state.lost_frames", t.lost_frames)?;
         int_key("track_state.drift_check_frames", t.drift_check_frames)?;
+        int_key("track_state.drift_calm_frames", t.drift_calm_frames)?;
         float_key("track_state.drift_threshold", t.drift_threshold)?;
         int_key("track_state.drift_recheck_frames", t.drift_recheck_frames)?;
         let r = &self.redetection;
@@ -1097,7 +1103,7 @@ mod tests {
                 k.name
             );
         }
-        assert_eq!(live_keys().count(), 22);
+        assert_eq!(live_keys().count(), 23);
     }
 
     #[test]

@@ -81,6 +81,13 @@ pub trait Tracker {
 
     /// True between a successful `init` and `reset`.
     fn is_initialized(&self) -> bool;
+
+    /// Search passes of a learned verifier network since the last `init` (drift checks,
+    /// confirmations and re-detection windows; the template's pass excluded): the unit of
+    /// the verifier's cost. `None` for a tracker without such a network.
+    fn verifier_passes(&self) -> Option<u64> {
+        None
+    }
 }
 
 /// Window geometry fixed at initialisation (ALGORITHM.md §1).
@@ -307,6 +314,8 @@ struct State {
     states: StateMachine,
     lost: lost::LostState,
     drift: drift::DriftCheck,
+    /// Search passes of the learned verifier since `init` ([`Tracker::verifier_passes`]).
+    verifier_passes: u64,
 }
 
 impl State {
@@ -781,6 +790,7 @@ impl BevtTracker {
             states: StateMachine::new(spec.config.track_state),
             lost: lost::LostState::default(),
             drift: drift::DriftCheck::default(),
+            verifier_passes: 0,
         }))
     }
 
@@ -1071,6 +1081,11 @@ impl Tracker for BevtTracker {
 
     fn is_initialized(&self) -> bool {
         self.state.is_some()
+    }
+
+    fn verifier_passes(&self) -> Option<u64> {
+        self.verifier.as_ref()?;
+        self.state.as_ref().map(|s| s.verifier_passes)
     }
 }
 

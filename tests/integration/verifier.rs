@@ -184,7 +184,9 @@ fn assert_kept_from(r: &[(bevt_core::TrackOutput, bevt_core::BBox)], back: usize
 /// `redetection.verifier: nanotrack` with the embedded NanoTrack v2 backbone and head: the
 /// target re-entering far away is re-acquired by the verifier's whole-frame tiles alone (the
 /// filter's proposals off) within 25 frames of its return (the tiles cycle over the frame in
-/// ~30 lost frames here), where without the verifier it is not re-acquired at all.
+/// ~30 lost frames here), where without the verifier it is not re-acquired at all. The
+/// passes it spends: at most `verifier_windows` on a lost frame, and one on each frame its
+/// candidate is being confirmed (the tiles are not swept while the candidate holds).
 #[test]
 fn nanotrack_verifier_reacquires_a_far_reentry_the_filter_alone_misses() {
     let seq = bevt_tests::scenes::far_reentry();
@@ -199,10 +201,34 @@ fn nanotrack_verifier_reacquires_a_far_reentry_the_filter_alone_misses() {
     cfg.redetection.verifier = VerifierKind::Nanotrack;
     cfg.redetection.verifier_backbone = String::new();
     cfg.redetection.verifier_head = String::new();
-    let (back, r) = reacquired_at(&seq, cfg);
+    let windows = cfg.redetection.verifier_windows as u64;
+    let confirm = cfg.redetection.reacquire_frames;
+    let run = bevt_tests::track_synthetic_passes(&seq, cfg, seq.truth(0));
+    let passes: Vec<u64> = run.iter().map(|x| x.2).collect();
+    let r: Vec<_> = run.into_iter().map(|(o, b, _)| (o, b)).collect();
+    let back = (50..seq.frames).find(|&t| r[t - 1].0.state == TrackState::Reacquired);
     println!("verifier: re-acquired at {back:?}");
     let back = back.expect("the verifier never re-acquired the target");
     assert_kept_from(&r, back);
+    for t in 1..back {
+        if r[t - 1].0.state == TrackState::Lost {
+            assert!(
+                passes[t - 1] <= windows,
+                "frame {t}: {} passes",
+                passes[t - 1]
+            );
+        }
+    }
+    // The candidate's first frame swept the tiles; the frames confirming it follow it alone.
+    let first = back + 1 - confirm;
+    assert!(
+        passes[first - 1] > 1,
+        "frame {first}: {}",
+        passes[first - 1]
+    );
+    for t in first + 1..=back {
+        assert_eq!(passes[t - 1], 1, "frame {t} confirms the candidate");
+    }
 }
 
 /// A verifier whose head file is missing is a clear error at init, naming the key.
@@ -339,4 +365,50 @@ fn verifiers_share_optimised_plans_within_a_process() {
     let other = dir.join("other.onnx").display().to_string();
     assert!(NanoVerifier::new(&other, "").is_err());
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The drift check's calm interval (`track_state.drift_calm_frames`): on a visible target
+/// whose checks score at least the re-acquisition bar, the checks come every
+/// `drift_calm_frames` instead of every `drift_check_frames` (fewer passes, every frame
+/// still `tracking`); once the target is hidden, the learning gate's refusals end the calm,
+/// so the hidden target is flagged within `drift_check_frames` (plus the verifier's one
+/// frame of latency), where a check left at the calm interval would come later.
+#[test]
+fn the_calm_drift_check_comes_back_as_soon_as_the_filter_falls() {
+    use bevt_core::eval::synth::SynthParams;
+    const HIDE: usize = 40;
+    let visible = SynthParams {
+        frames: 91,
+        ..SynthParams::default()
+    };
+    let mut cfg = TrackerConfig::default();
+    cfg.track_state.lost_threshold = 0.0;
+    cfg.track_state.drift_check_frames = 15;
+    let checks = |cfg: &TrackerConfig, seq: &SynthParams| {
+        let run = bevt_tests::track_synthetic_passes(seq, cfg.clone(), seq.truth(0));
+        let at: Vec<usize> = (1..=run.len()).filter(|&t| run[t - 1].2 > 0).collect();
+        (run, at)
+    };
+    cfg.track_state.drift_calm_frames = 0;
+    let (run, every15) = checks(&cfg, &visible);
+    assert!(run.iter().all(|x| x.0.state == TrackState::Tracking));
+    assert_eq!(every15, vec![1, 16, 31, 46, 61, 76], "{every15:?}");
+    cfg.track_state.drift_calm_frames = 30;
+    let (run, calm) = checks(&cfg, &visible);
+    assert!(run.iter().all(|x| x.0.state == TrackState::Tracking));
+    assert_eq!(calm, vec![1, 31, 61], "{calm:?}");
+
+    let hidden = SynthParams {
+        frames: 70,
+        hidden: Some((HIDE, 70)),
+        ..SynthParams::default()
+    };
+    let (run, at) = checks(&cfg, &hidden);
+    let flagged = (1..=run.len())
+        .find(|&t| run[t - 1].0.state != TrackState::Tracking)
+        .expect("the hidden target was never flagged");
+    assert!(
+        (HIDE..=HIDE + 16).contains(&flagged),
+        "flagged on frame {flagged}, checks on {at:?}"
+    );
 }

@@ -36,6 +36,19 @@ pub fn track_synthetic(
     cfg: TrackerConfig,
     init: BBox,
 ) -> Vec<(TrackOutput, BBox)> {
+    track_synthetic_passes(seq, cfg, init)
+        .into_iter()
+        .map(|(o, b, _)| (o, b))
+        .collect()
+}
+
+/// [`track_synthetic`] with the learned verifier's search passes of each frame
+/// ([`Tracker::verifier_passes`]; 0 without a verifier).
+pub fn track_synthetic_passes(
+    seq: &SynthParams,
+    cfg: TrackerConfig,
+    init: BBox,
+) -> Vec<(TrackOutput, BBox, u64)> {
     let spec = cfg.validate().expect("valid config");
     let mut t = BevtTracker::new(spec);
     let f0 = seq.frame(0);
@@ -44,12 +57,17 @@ pub fn track_synthetic(
         init,
     )
     .expect("init");
+    let mut before = t.verifier_passes().unwrap_or(0);
     (1..seq.frames)
         .map(|i| {
             let f = seq.frame(i);
             let fr =
                 Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).expect("frame");
-            (t.update(&fr).expect("update"), f.truth)
+            let out = t.update(&fr).expect("update");
+            let now = t.verifier_passes().unwrap_or(0);
+            let passes = now - before;
+            before = now;
+            (out, f.truth, passes)
         })
         .collect()
 }

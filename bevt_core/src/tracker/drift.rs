@@ -3,7 +3,10 @@
 //! learned what it now sees. The learned verifier (`redetection.verifier`, NanoTrack) holds
 //! the first frame's template and never learns, so it is an independent witness:
 //!
-//! - every `track_state.drift_check_frames` confident frames it scores the box; a score
+//! - every `track_state.drift_check_frames` confident frames it scores the box (every
+//!   `track_state.drift_calm_frames` while calm: the last check scored at least the
+//!   re-acquisition bar `redetection.verifier_threshold` and the learning gate has refused
+//!   no frame since, the filter's score holding its recent level); a score
 //!   below `track_state.drift_threshold` makes the state `uncertain` (reason
 //!   [`StateReason::OffTarget`]) and brings the next check forward to
 //!   `track_state.drift_recheck_frames` frames later. A second failure in a row makes the
@@ -29,12 +32,14 @@ use crate::image::Frame;
 use crate::redetect::{context_side, Verifier};
 use crate::track_state::{StateReason, TrackState};
 
-/// Between checks: confident frames since the last check, and its result when it
-/// disagreed (the verifier's score).
+/// Between checks: confident frames since the last check, its result when it disagreed
+/// (the verifier's score), and whether the track is calm: the last check scored at least
+/// the re-acquisition bar and the learning gate has taken every frame since.
 #[derive(Debug, Default)]
 pub(super) struct DriftCheck {
     since: usize,
     off: Option<f32>,
+    calm: bool,
 }
 
 /// What a tracked frame reports: state, reason and the published confidence.
@@ -43,12 +48,13 @@ pub(super) type Report = (TrackState, StateReason, f32);
 /// The verifier's best score around the box (`None`: no template, nothing to witness):
 /// the score alone, no box regression.
 fn score_at_box(
-    st: &State,
+    st: &mut State,
     frame: &Frame<'_>,
     v: &mut (dyn Verifier + 'static),
 ) -> Result<Option<f32>, TrackError> {
     let size = st.target_size();
     let side = 2.0 * context_side(size.w, size.h);
+    st.verifier_passes += 1;
     Ok(v.search_above(frame, st.pos, side, f32::INFINITY)?
         .map(|s| s.score()))
 }
@@ -104,8 +110,15 @@ pub(super) fn check(
             return Ok(unchanged);
         }
     }
+    // The filter's own evidence against its recent level: a frame the learning gate
+    // refused (its score fell below the gate's share of its running reference) ends the
+    // calm, so the next check is due after `drift_check_frames` again.
+    if st.gate.skipped_in_a_row() > 0 {
+        st.drift.calm = false;
+    }
     let every = match (st.drift.off, t.drift_recheck_frames) {
         (Some(_), r) if r > 0 => r.min(t.drift_check_frames),
+        _ if st.drift.calm => t.drift_calm_frames.max(t.drift_check_frames),
         _ => t.drift_check_frames,
     };
     if st.drift.since == 0 || st.drift.since >= every {
@@ -119,13 +132,18 @@ pub(super) fn check(
                     return Ok((state, reason, c));
                 }
                 st.drift.off = Some(s);
+                st.drift.calm = false;
             }
-            Some(_) => {
+            Some(s) => {
                 st.drift.off = None;
+                st.drift.calm = s >= spec.config.redetection.verifier_threshold;
                 lost::verified(st);
             }
             // No hit at all (no template) counts as agreement: nothing to witness with.
-            None => st.drift.off = None,
+            None => {
+                st.drift.off = None;
+                st.drift.calm = false;
+            }
         }
     }
     st.drift.since += 1;

@@ -242,8 +242,8 @@ fn hit_scale(st: &State, hit: &VerifierHit) -> f32 {
     }
 }
 
-/// One lost frame of the learned verifier: follow its candidate, spend the rest of
-/// `verifier_windows` on the whole-frame tiles; the candidate once it has been above
+/// One lost frame of the learned verifier: follow its candidate (one pass while it holds),
+/// or spend `verifier_windows` on the whole-frame tiles; the candidate once it has been above
 /// `verifier_threshold` for `reacquire_frames` frames in a row and (with
 /// `verifier_filter_check`) the frozen filter makes it a candidate too. A candidate the
 /// filter refuses is dropped (it must be confirmed anew).
@@ -262,6 +262,7 @@ fn verify(
     // needed (`followed` drops the candidate, `offer` ignores the hit; the head's outputs
     // are checked finite, so a score is never NaN).
     if let Some(c) = st.lost.vcand.current() {
+        st.verifier_passes += 1;
         let hit = v.search_above(frame, c.pos, 2.0 * verifier_side(st, c.scale), thr)?;
         match hit {
             Some(Scored::Hit(h)) => {
@@ -274,7 +275,15 @@ fn verify(
                 .vcand
                 .followed(c.pos, c.scale, f32::NEG_INFINITY, thr),
         }
-        passes = passes.saturating_sub(1);
+        // A candidate that holds is being confirmed: the frame costs this one pass. The
+        // tiles could only replace it with a higher-scoring hit elsewhere during its
+        // `reacquire_frames` frames; a candidate that fails (its score below the bar, or
+        // the filter check) sends the search back to the tiles, this frame or the next.
+        passes = if st.lost.vcand.current().is_some() {
+            0
+        } else {
+            passes.saturating_sub(1)
+        };
     }
     for _ in 0..passes {
         let Some(w) = st.lost.vplan.next_window() else {
@@ -282,6 +291,7 @@ fn verify(
         };
         let scale = st.lost.scale_at_loss * w.scale;
         let side = 2.0 * verifier_side(st, scale);
+        st.verifier_passes += 1;
         if let Some(Scored::Hit(h)) = v.search_above(frame, w.center, side, thr)? {
             let scale = hit_scale(st, &h);
             st.lost.vcand.offer(h.pos, scale, h.score, thr);

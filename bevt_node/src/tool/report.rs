@@ -45,6 +45,9 @@ pub struct SequenceSummary {
     pub learned: usize,
     /// Frames skipped by verification.
     pub skipped: usize,
+    /// Learned-verifier search passes (absent without a verifier).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub verifier_passes: Option<u64>,
     /// Mean consensus score over updates.
     pub mean_consensus: f64,
     /// Confidence ROC-AUC and lost-state precision/recall (README "Confidence and lost
@@ -96,6 +99,9 @@ pub struct Overall {
     /// Frames / tracking time over all sequences (our tracker only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fps_pooled: Option<f64>,
+    /// Learned-verifier search passes over all sequences (our tracker, with a verifier).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub verifier_passes: Option<u64>,
     /// Mean precision curve at 0..=50 px.
     pub precision_curve: Vec<f64>,
     /// Mean success curve at IoU 0, 0.05, …, 1.
@@ -194,6 +200,7 @@ pub fn summarize_run(r: &SequenceRun) -> SequenceSummary {
         fps: r.run.fps(),
         learned: r.run.learned,
         skipped: r.run.skipped,
+        verifier_passes: r.run.verifier_passes,
         mean_consensus: if cons.is_empty() {
             f64::NAN
         } else {
@@ -236,6 +243,7 @@ fn overall_of(scores: &[&SequenceScores]) -> Overall {
         reacquire_frames_mean: None,
         fps_mean: None,
         fps_pooled: None,
+        verifier_passes: None,
         precision_curve: mean_curve(&pc),
         success_curve: mean_curve(&sc),
     }
@@ -275,6 +283,10 @@ pub fn build_summary(
             0.0
         });
     }
+    overall.verifier_passes = done
+        .iter()
+        .filter_map(|r| r.verifier_passes)
+        .reduce(|a, b| a + b);
     let compare: Vec<PeerScores> = peers
         .iter()
         .map(|(name, dir)| score_peer(name, dir, &done, truths))
@@ -442,7 +454,7 @@ pub fn console_table(s: &Summary) -> String {
     let mut t = String::new();
     let _ = writeln!(
         t,
-        "{:<14} {:>6} {:>7} {:>6} {:>7} {:>8} {:>8} {:>7} {:>7} {:>7} {:>7} {:>7} {:>9} {:>9}  status",
+        "{:<14} {:>6} {:>7} {:>6} {:>7} {:>8} {:>8} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>9} {:>9}  status",
         "sequence",
         "frames",
         "P@20",
@@ -450,6 +462,7 @@ pub fn console_table(s: &Summary) -> String {
         "fps",
         "learned",
         "skipped",
+        "vpasses",
         "confAUC",
         "flagP",
         "flagR",
@@ -485,7 +498,7 @@ pub fn console_table(s: &Summary) -> String {
             .collect();
         let _ = writeln!(
             t,
-            "{:<14} {:>6} {:>7.3} {:>6.3} {:>7.1} {:>8} {:>8} {} {:>9}  {}",
+            "{:<14} {:>6} {:>7.3} {:>6.3} {:>7.1} {:>8} {:>8} {:>7} {} {:>9}  {}",
             r.name,
             r.frames,
             r.precision_20,
@@ -493,6 +506,7 @@ pub fn console_table(s: &Summary) -> String {
             r.fps,
             r.learned,
             r.skipped,
+            r.verifier_passes.map_or("-".to_string(), |p| p.to_string()),
             lost_cells(r.lost.as_ref()),
             if reacq.is_empty() {
                 "-".to_string()
@@ -507,7 +521,7 @@ pub fn console_table(s: &Summary) -> String {
     let o = &s.overall;
     let _ = writeln!(
         t,
-        "{:<14} {:>6} {:>7.3} {:>6.3} {:>7.1}   (mean over {} sequences; {} failed; pooled fps {:.1})",
+        "{:<14} {:>6} {:>7.3} {:>6.3} {:>7.1}   (mean over {} sequences; {} failed; pooled fps {:.1}{})",
         "OVERALL",
         "",
         o.precision_20,
@@ -515,7 +529,9 @@ pub fn console_table(s: &Summary) -> String {
         o.fps_mean.unwrap_or(0.0),
         o.sequences,
         o.failed,
-        o.fps_pooled.unwrap_or(0.0)
+        o.fps_pooled.unwrap_or(0.0),
+        o.verifier_passes
+            .map_or(String::new(), |p| format!("; {p} verifier passes"))
     );
     if let Some(l) = &o.lost {
         let _ = writeln!(

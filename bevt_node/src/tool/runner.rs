@@ -36,6 +36,9 @@ pub struct TrackRun {
     pub error: Option<String>,
     /// The run stopped because the tracker refused the initial box.
     pub init_failed: bool,
+    /// The tracker's learned-verifier search passes over the run
+    /// ([`bevt_core::tracker::Tracker::verifier_passes`]; `None` without a verifier).
+    pub verifier_passes: Option<u64>,
 }
 
 impl TrackRun {
@@ -158,6 +161,9 @@ where
                 break;
             }
         }
+    }
+    if !run.init_failed {
+        run.verifier_passes = tracker.verifier_passes();
     }
     run
 }
