@@ -698,17 +698,31 @@ impl NanoVerifier {
         center: Point2,
         side: f32,
     ) -> Result<Option<HeadMaps>, TrackError> {
-        if self.template.is_empty() || !(side.is_finite() && side > 0.0) {
+        if !self.search_features(frame, center, side)? {
             return Ok(None);
         }
-        self.crop(frame, center, side, SEARCH_SIDE);
-        self.search = self.run_backbone(SEARCH_SIDE)?;
         Ok(Some(self.run_head()?))
     }
 
     /// True once a template is set.
     pub fn has_template(&self) -> bool {
         !self.template.is_empty()
+    }
+
+    /// The backbone's features of the square search crop of side `side` at `center` into
+    /// `self.search`; false (nothing run) without a template or for a degenerate side.
+    fn search_features(
+        &mut self,
+        frame: &Frame<'_>,
+        center: Point2,
+        side: f32,
+    ) -> Result<bool, TrackError> {
+        if self.template.is_empty() || !(side.is_finite() && side > 0.0) {
+            return Ok(false);
+        }
+        self.crop(frame, center, side, SEARCH_SIDE);
+        self.search = self.run_backbone(SEARCH_SIDE)?;
+        Ok(true)
     }
 }
 
@@ -736,11 +750,9 @@ impl Verifier for NanoVerifier {
         center: Point2,
         side: f32,
     ) -> Result<Option<VerifierHit>, TrackError> {
-        if self.template.is_empty() || !(side.is_finite() && side > 0.0) {
+        if !self.search_features(frame, center, side)? {
             return Ok(None);
         }
-        self.crop(frame, center, side, SEARCH_SIDE);
-        self.search = self.run_backbone(SEARCH_SIDE)?;
         let (margins, loc) = self.run_head()?;
         Ok(best_point(&margins).map(|(i, score)| hit_at(frame, center, side, i, score, &loc)))
     }
@@ -752,11 +764,9 @@ impl Verifier for NanoVerifier {
         side: f32,
         bar: f32,
     ) -> Result<Option<Scored>, TrackError> {
-        if self.template.is_empty() || !(side.is_finite() && side > 0.0) {
+        if !self.search_features(frame, center, side)? {
             return Ok(None);
         }
-        self.crop(frame, center, side, SEARCH_SIDE);
-        self.search = self.run_backbone(SEARCH_SIDE)?;
         let reaches = |m: &[f32]| best_point(m).is_some_and(|(_, s)| s >= bar);
         let (margins, loc) = self.run_head_if(reaches)?;
         let Some((i, score)) = best_point(&margins) else {
