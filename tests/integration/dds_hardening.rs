@@ -343,7 +343,17 @@ fn reinit(p: &Peers) -> (bool, String) {
             let req: ReinitRequest =
                 bevt_node::convert::reinit_request(b, Time::from_nanos(stamp), "");
             if let Some(r) = p.gs.reinit(&req, Duration::from_secs(5)) {
-                return (r.success, r.message);
+                // The node keeps the last 30 frames (1.5 s at 20 Hz); a request that reaches
+                // it later than that (the service's first request can wait for DDS matching,
+                // seconds on a loaded machine) is refused for its stale stamp, the current
+                // track kept. A ground station then asks again with a newer frame, as here.
+                if r.success || !r.message.contains("no buffered frame") {
+                    return (r.success, r.message);
+                }
+                println!(
+                    "reinit refused for a stale stamp, asking again: {}",
+                    r.message
+                );
             }
         }
         assert!(Instant::now() < end, "no reinit answer from the node");
