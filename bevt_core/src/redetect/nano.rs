@@ -18,7 +18,7 @@
 //! sha256), so the default needs no file at run time; a path loads that file instead. Each
 //! network is optimised once per input size (backbone: 127 and 255) and run single-threaded.
 //! Before tract's optimisation, the depthwise convolutions (the backbone's eight, the
-//! head's twelve) are replaced by [`dwconv`]'s vectorised kernel: 2.4× fewer instructions
+//! head's twelve) are replaced by [`dwconv`]'s vectorised kernel: 2.2× fewer instructions
 //! for them, the outputs within rounding of tract's own plans (tested).
 //! The head is optimised as its two branches, each alone: the classification branch (the
 //! scores) and the box regression branch. They share no node after the inputs, so together
