@@ -28,6 +28,7 @@
 //! dropped. The track is taken back only when one candidate has been confident for
 //! `reacquire_frames` frames in a row, so a brief look-alike does not steal the track.
 
+pub mod dwconv;
 pub mod nano;
 
 use crate::config::RedetectionConfig;
