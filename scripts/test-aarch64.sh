@@ -103,10 +103,15 @@ if [ "$mode" != check ]; then
   [ -n "$node_features" ] || fail "AARCH64_FEATURES is empty (name a ROS distro feature: jazzy or humble)"
   selection=(--locked --target "$triple" -p bevt_core -p bevt_node --no-default-features
     --features "bevt_core/default,$node_features")
+  # The cross build's own settings, for its two cargo commands only (the native build below
+  # must keep the test command's profile, or it would all be compiled again): its own target
+  # dir, and no line tables for our crates (the dependencies have none in dev already), which
+  # the tests and the eval under qemu do not read.
+  cross_env=(env CARGO_TARGET_DIR="$cross_dir" CARGO_PROFILE_DEV_DEBUG=false)
 
   step "build bevt_core's unit tests for $triple (bevt_node features: $features)"
   rm -f "$core_tests_file"
-  CARGO_TARGET_DIR="$cross_dir" cargo test --no-run "${selection[@]}" --lib \
+  "${cross_env[@]}" cargo test --no-run "${selection[@]}" --lib \
     --message-format=json-render-diagnostics >"$work/test-build.json" ||
     fail "cross build of the unit tests"
   core_tests=$(python3 - "$work/test-build.json" <<'EOF'
@@ -126,7 +131,7 @@ EOF
   [ -n "$core_tests" ] && [ -x "$core_tests" ] || fail "no bevt_core test executable in cargo's output"
 
   step "build bevt_node and bevt for $triple"
-  CARGO_TARGET_DIR="$cross_dir" cargo build "${selection[@]}" --bin bevt_node --bin bevt ||
+  "${cross_env[@]}" cargo build "${selection[@]}" --bin bevt_node --bin bevt ||
     fail "cross build of the programs"
   # Written last: a --check finds it only after a complete build.
   printf '%s\n' "$core_tests" >"$core_tests_file"
@@ -178,9 +183,15 @@ for prog in bevt_node bevt; do
   grep -q '^Usage:' <<<"$help" || fail "$prog --help under qemu printed no usage line"
 done
 
-step "native bevt (x86_64)"
-cargo build --locked -p bevt_node --bin bevt
+# The native `bevt` as `cargo test --workspace` (README's test command) builds it for the
+# integration tests, in that command's environment (CARGO_INCREMENTAL=0, exported above for
+# the cross build, is part of the local crates' fingerprints): under CI that command has just
+# run, so this is a no-op. Before, `cargo build -p bevt_node` here compiled RustDDS, ros2-client,
+# bevt_core and bevt_node again (over 2 minutes of CI on 2026-11-26).
+step "native bevt (x86_64), as the test command builds it"
+env -u CARGO_INCREMENTAL cargo test --locked --workspace --no-run -q || fail "native build"
 native_bin="$target_dir/debug"
+[ -x "$native_bin/bevt" ] || fail "no native bevt at $native_bin/bevt"
 
 # The unit tests beside the evals; their output is printed once both are done.
 step "bevt_core unit tests under ${qemu[*]}, beside the evals"
