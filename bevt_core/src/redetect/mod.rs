@@ -30,6 +30,7 @@
 
 pub mod dwconv;
 pub mod nano;
+pub mod stem;
 
 use crate::config::RedetectionConfig;
 use crate::error::TrackError;
