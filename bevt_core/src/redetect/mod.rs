@@ -30,7 +30,6 @@
 
 pub mod dwconv;
 pub mod nano;
-pub mod stem;
 
 use crate::config::RedetectionConfig;
 use crate::error::TrackError;

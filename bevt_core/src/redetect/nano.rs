@@ -19,8 +19,7 @@
 //! network is optimised once per input size (backbone: 127 and 255) and run single-threaded.
 //! Before tract's optimisation, the depthwise convolutions (the backbone's eight, the
 //! head's twelve) are replaced by [`dwconv`]'s vectorised kernel: 2.2× fewer instructions
-//! for them, the outputs within rounding of tract's own plans (tested); the backbone's
-//! first convolution (3 → 16 channels, 3×3, stride 2) likewise by [`stem`]'s.
+//! for them, the outputs within rounding of tract's own plans (tested).
 //! The head is optimised as its two branches, each alone: the classification branch (the
 //! scores) and the box regression branch. They share no node after the inputs, so together
 //! they compute what the whole head does, bit for bit (tested); a search that needs only the
@@ -35,7 +34,7 @@
 use crate::error::TrackError;
 use crate::geometry::Point2;
 use crate::image::{Frame, Patch, Sampler};
-use crate::redetect::{context_side, dwconv, stem, Scored, Verifier, VerifierHit};
+use crate::redetect::{context_side, dwconv, Scored, Verifier, VerifierHit};
 use std::path::Path;
 use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 use thiserror::Error;
@@ -209,15 +208,15 @@ impl Net {
 
 impl Planned {
     /// Optimises `model` with `inputs` (names and shapes) and `outputs` (names); with
-    /// `own_kernels`, its depthwise convolutions run on [`dwconv`] and its first
-    /// convolution on [`stem`] instead of tract's kernels (see the module doc).
+    /// `fast_depthwise`, its depthwise convolutions run on [`dwconv`] instead of tract's
+    /// kernel (see the module doc).
     fn new(
         model: &InferenceModel,
         key: &'static str,
         path: &str,
         inputs: &[(&str, &[usize])],
         outputs: &[&str],
-        own_kernels: bool,
+        fast_depthwise: bool,
     ) -> Result<Self, NanoError> {
         let err = |e: tract_onnx::prelude::TractError| NanoError::Model {
             key,
@@ -240,9 +239,8 @@ impl Planned {
         }
         let mut typed = m.into_typed().map_err(err)?;
         typed.declutter().map_err(err)?;
-        if own_kernels {
+        if fast_depthwise {
             dwconv::rewrite(&mut typed).map_err(err)?;
-            stem::rewrite(&mut typed).map_err(err)?;
         }
         typed.optimize().map_err(err)?;
         let plan = TypedSimplePlan::new(typed).map_err(err)?;
@@ -843,12 +841,11 @@ mod tests {
         diff / scale.max(f32::MIN_POSITIVE)
     }
 
-    /// The backbone at both sizes and the whole head, planned with [`dwconv`] and [`stem`] in
-    /// place of tract's kernels, against tract's own plans on the same inputs: every output
+    /// The backbone at both sizes and the whole head, planned with [`dwconv`] in place of
+    /// tract's depthwise kernel, against tract's own plans on the same inputs: every output
     /// within 1e-4 of the output's scale (measured: under 1e-6). And the rewrite did happen:
-    /// the backbone's eight depthwise convolutions and its first convolution, and the head's
-    /// twelve depthwise ones, are replaced, and the backbone's output bits differ from
-    /// tract's.
+    /// the backbone's eight depthwise convolutions and the head's twelve are replaced, and
+    /// the backbone's output bits differ from tract's.
     #[test]
     fn fast_depthwise_plans_match_tracts_own_plans() {
         let (bb, bb_name) = load(BACKBONE_KEY, "", EMBEDDED_BACKBONE).unwrap();
@@ -865,11 +862,6 @@ mod tests {
         typed.declutter().unwrap();
         let backbone_replaced = dwconv::rewrite(&mut typed).unwrap();
         assert_eq!(backbone_replaced, expected_rewrites(8), "backbone");
-        assert_eq!(
-            stem::rewrite(&mut typed).unwrap(),
-            1,
-            "backbone's first convolution"
-        );
         let mut head = hd
             .clone()
             .with_input_fact(
@@ -887,11 +879,6 @@ mod tests {
         head.declutter().unwrap();
         let head_replaced = dwconv::rewrite(&mut head).unwrap();
         assert!(head_replaced <= 12, "head: {head_replaced}");
-        assert_eq!(
-            stem::rewrite(&mut head).unwrap(),
-            0,
-            "head: no stem convolution"
-        );
         #[cfg(target_arch = "x86_64")]
         assert_eq!(head_replaced, 12, "head");
         let run =
@@ -932,70 +919,6 @@ mod tests {
         for (name, (a, b)) in names.iter().zip(a.iter().zip(&b)) {
             let d = relative_diff(a, b);
             assert!(d <= 1e-4, "head {name}: {d}");
-        }
-    }
-
-    /// The backbone planned with only its first convolution on [`stem`] against tract's own
-    /// plan, both sizes: the output within 1e-6 of its scale, in other bits (the rewrite
-    /// happened: exactly one node replaced, and no `Conv` with few input channels left).
-    #[test]
-    fn stem_plans_match_tracts_own_plans() {
-        let (bb, _) = load(BACKBONE_KEY, "", EMBEDDED_BACKBONE).unwrap();
-        let plan = |side: usize, own: bool| {
-            let mut typed = bb
-                .clone()
-                .with_input_fact(
-                    0,
-                    InferenceFact::dt_shape(DatumType::F32, vec![1, 3, side, side]),
-                )
-                .unwrap()
-                .into_typed()
-                .unwrap();
-            typed.declutter().unwrap();
-            if own {
-                assert_eq!(stem::rewrite(&mut typed).unwrap(), 1, "{side}");
-                assert_eq!(
-                    stem::rewrite(&mut typed).unwrap(),
-                    0,
-                    "{side}: replaced twice"
-                );
-                let stems = typed
-                    .nodes()
-                    .iter()
-                    .filter(|n| n.op_is::<stem::StemConv>())
-                    .count();
-                assert_eq!(stems, 1, "{side}");
-            }
-            typed.optimize().unwrap();
-            let plan = TypedSimplePlan::new(typed).unwrap();
-            Planned {
-                plan,
-                key: BACKBONE_KEY,
-                path: String::new(),
-            }
-        };
-        for (side, cells) in [(TEMPLATE_SIDE, TEMPLATE_CELLS), (SEARCH_SIDE, SEARCH_CELLS)] {
-            let input: Vec<f32> = (0..3 * side * side)
-                .map(|i| ((i * 7919 % 256) as f32 + (i / side) as f32 * 0.5) % 256.0)
-                .collect();
-            let shape: &[usize] = &[1, 3, side, side];
-            let out: &[(&str, &[usize])] = &[("output", &[1, CHANNELS, cells, cells])];
-            let run = |own: bool| {
-                let p = plan(side, own);
-                Net::new(&p)
-                    .unwrap()
-                    .run(&[(shape, &input)], out)
-                    .unwrap()
-                    .swap_remove(0)
-            };
-            let (a, b) = (run(true), run(false));
-            let d = relative_diff(&a, &b);
-            assert!(d <= 1e-6, "backbone {side}: {d}");
-            assert_ne!(
-                bits(&a),
-                bits(&b),
-                "the same bits: was the rewrite applied?"
-            );
         }
     }
 
