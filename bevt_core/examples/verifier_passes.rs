@@ -1,0 +1,62 @@
+//! Runs NanoTrack verifier passes in a loop, for instruction counts under callgrind: the
+//! difference between two runs with different pass counts is the cost of the extra passes
+//! (plan building and the verifier's start-up check cancel out).
+//!
+//! `verifier_passes <stage> <passes> [target side px]`, stage one of
+//! - `search`: score-only search passes (`search_above` with an unreachable bar: crop,
+//!   backbone 255×255, the head's classification branch), as the drift check runs them;
+//! - `template`: template passes (`set_template`: crop, backbone 127×127);
+//! - `crop`: as `search`, the search crop alone is what differs (see `docs/benchmarks.md`).
+//!
+//! The frame is a synthetic textured 1280×720 RGB image; the target (default 20 px, so a
+//! search region of about 80 px, upsampled) sits at its centre.
+//!
+//! ```sh
+//! cargo build --release -p bevt_core --example verifier_passes
+//! valgrind --tool=callgrind --callgrind-out-file=cg.12 target/release/examples/verifier_passes search 12
+//! valgrind --tool=callgrind --callgrind-out-file=cg.2 target/release/examples/verifier_passes search 2
+//! ```
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use bevt_core::image::{Frame, PixelFormat};
+use bevt_core::redetect::nano::NanoVerifier;
+use bevt_core::redetect::{context_side, Verifier};
+use bevt_core::Point2;
+use std::hint::black_box;
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let usage = "usage: verifier_passes search|template <passes> [target side px]";
+    let stage = args.get(1).expect(usage).clone();
+    let passes: usize = args.get(2).expect(usage).parse().expect(usage);
+    let target: f32 = args.get(3).map_or(20.0, |s| s.parse().expect(usage));
+    let (w, h) = (1280usize, 720usize);
+    let data: Vec<u8> = (0..w * h * 3)
+        .map(|i| {
+            let (p, c) = (i / 3, i % 3);
+            let (x, y) = (p % w, p / w);
+            ((x * 7 + y * 13 + c * 50) ^ (x * y / 17)) as u8
+        })
+        .collect();
+    let frame = Frame::packed(&data, w, h, PixelFormat::Rgb8).unwrap();
+    let center = Point2 { x: 640.3, y: 360.7 };
+    let mut v = NanoVerifier::new("", "").unwrap();
+    v.set_template(&frame, center, target, target).unwrap();
+    let side = 2.0 * context_side(target, target);
+    for i in 0..passes {
+        match stage.as_str() {
+            "search" => {
+                let c = Point2 {
+                    x: center.x + i as f32,
+                    y: center.y,
+                };
+                black_box(v.search_above(&frame, c, side, f32::INFINITY).unwrap());
+            }
+            "template" => {
+                v.set_template(&frame, center, target + i as f32 * 0.01, target)
+                    .unwrap();
+            }
+            _ => panic!("{usage}"),
+        }
+    }
+}
