@@ -12,7 +12,7 @@
 //! search region of about 80 px, upsampled) sits at its centre.
 //!
 //! ```sh
-//! cargo build --release -p bevt_core --example verifier_passes
+//! cargo build --release -p bevt_core --features bench --example verifier_passes
 //! valgrind --tool=callgrind --callgrind-out-file=cg.12 target/release/examples/verifier_passes search 12
 //! valgrind --tool=callgrind --callgrind-out-file=cg.2 target/release/examples/verifier_passes search 2
 //! ```
