@@ -5,7 +5,7 @@
 # colcon-ros-cargo passes `--target-dir <build-base>/bevt_node` to cargo; that folder is made
 # a link to this workspace's target/ so colcon reuses what cargo already built instead of
 # compiling everything a second time. The cargo profile is the first argument (default
-# `dev`, what `cargo test` just built in CI; `flight` for the binaries that fly).
+# `dev`, what `cargo test --workspace` just built in CI; `flight` for the binaries that fly).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
@@ -15,9 +15,15 @@ if ! command -v cargo-ament-build >/dev/null 2>&1; then
   cargo install --locked cargo-ament-build@0.1.11
 fi
 # cargo-ament-build looks for the binaries in target/<profile name>, except for the dev
-# profile, whose folder is target/debug: pass no profile for dev.
-cargo_args=()
-[ "$profile" = dev ] || cargo_args=(--cargo-args --profile "$profile")
+# profile, whose folder is target/debug: pass no profile for dev. The dev build is the one
+# `cargo test --workspace` made, whose bevt_node has the `cnn` feature (bevt_tests' default):
+# the same feature here, or cargo would compile bevt_core and bevt_node again without it. The
+# flight binaries are built as they ship, without it.
+if [ "$profile" = dev ]; then
+  cargo_args=(--cargo-args --features cnn)
+else
+  cargo_args=(--cargo-args --profile "$profile")
+fi
 ws=$(mktemp -d)
 trap 'rm -rf "$ws"' EXIT
 mkdir -p "$ws/build" "$root/target"

@@ -84,6 +84,10 @@ done
 
 # shellcheck source=build-aarch64.sh
 . scripts/build-aarch64.sh env
+# The caller's setting, for the native build below (.ci/run exports 0; a developer's shell
+# usually leaves it unset).
+native_incremental=(env -u CARGO_INCREMENTAL)
+[ -z "${CARGO_INCREMENTAL+set}" ] || native_incremental=(env CARGO_INCREMENTAL="$CARGO_INCREMENTAL")
 export CARGO_INCREMENTAL=0
 target_dir=${CARGO_TARGET_DIR:-$PWD/target}
 cross_dir=${AARCH64_TARGET_DIR:-$target_dir}
@@ -184,12 +188,12 @@ for prog in bevt_node bevt; do
 done
 
 # The native `bevt` as `cargo test --workspace` (README's test command) builds it for the
-# integration tests, in that command's environment (CARGO_INCREMENTAL=0, exported above for
-# the cross build, is part of the local crates' fingerprints): under CI that command has just
-# run, so this is a no-op. Before, `cargo build -p bevt_node` here compiled RustDDS, ros2-client,
+# integration tests, in that command's environment (the caller's CARGO_INCREMENTAL, not the 0
+# exported above for the cross build: it is part of the local crates' fingerprints): under CI
+# that command has just run, so this is a no-op. Before, `cargo build -p bevt_node` here compiled RustDDS, ros2-client,
 # bevt_core and bevt_node again (over 2 minutes of CI on 2026-11-26).
 step "native bevt (x86_64), as the test command builds it"
-env -u CARGO_INCREMENTAL cargo test --locked --workspace --no-run -q || fail "native build"
+"${native_incremental[@]}" cargo test --locked --workspace --no-run -q || fail "native build"
 native_bin="$target_dir/debug"
 [ -x "$native_bin/bevt" ] || fail "no native bevt at $native_bin/bevt"
 
