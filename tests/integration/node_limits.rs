@@ -257,26 +257,10 @@ fn a_reinit_burst_is_answered_in_full_while_the_camera_keeps_being_tracked() {
     let (camera, truth) = spawn_camera(&s, seq, 20.0, stop.clone()).unwrap();
     let gs = GroundStation::new(&s).unwrap();
     // Initialise once on a frame the node has (the newest: zero stamp).
-    let end = Instant::now() + Duration::from_secs(20);
-    let first = loop {
-        assert!(Instant::now() < end, "the node never received the camera");
-        let newest = truth
-            .lock()
-            .unwrap()
-            .iter()
-            .next_back()
-            .map(|(k, v)| (*k, *v));
-        if let Some((stamp, b)) = newest {
-            let r = gs.reinit(
-                &reinit_request(b, Time::from_nanos(stamp), ""),
-                Duration::from_secs(5),
-            );
-            if let Some(r) = r.filter(|r| r.success) {
-                break r;
-            }
-        }
-        std::thread::sleep(Duration::from_millis(200));
-    };
+    let first = gs
+        .start_track_on_newest(&truth, Duration::from_secs(30))
+        .expect("the node never answered");
+    assert!(first.success, "{}", first.message);
     println!("initialised: {}", first.message);
     // Let the bucket refill, then the burst: requests on frames of every age in the buffer.
     std::thread::sleep(Duration::from_secs_f64(f64::from(burst) / rate + 0.5));

@@ -3,8 +3,6 @@
 //! within 2x its steady state and its boxes coming at the camera rate.
 
 use bevt_core::eval::synth::SynthParams;
-use bevt_msgs::builtin_interfaces::Time;
-use bevt_node::convert::reinit_request;
 use bevt_node::node::ros::{context, RosSettings};
 use bevt_node::node::sim::{spawn_camera, GroundStation};
 use ros2_client::rcl_interfaces::{DescribeParametersRequest, DescribeParametersResponse};
@@ -51,16 +49,8 @@ fn a_flood_of_huge_describe_requests_leaves_memory_and_boxes_alone() {
     let (camera, truth) = spawn_camera(&settings, seq, 20.0, stop.clone()).expect("camera");
     let gs = GroundStation::new(&settings).expect("ground station");
     std::thread::sleep(Duration::from_secs(2));
-    let (stamp, b) = {
-        let log = truth.lock().expect("truth");
-        let (k, v) = log.iter().next_back().expect("frames published");
-        (*k, *v)
-    };
     let r = gs
-        .reinit(
-            &reinit_request(b, Time::from_nanos(stamp), ""),
-            Duration::from_secs(5),
-        )
+        .start_track_on_newest(&truth, Duration::from_secs(30))
         .expect("reinit answered");
     assert!(r.success, "{}", r.message);
     // Steady state: 3 s of tracking.

@@ -243,32 +243,13 @@ fn ros2_param_round_trip_with_an_independent_cyclone_dds_client() {
     assert_eq!(peer.get("tracker.track_state.lost_threshold"), 0.3);
 
     // Start a track on the newest frame the camera published.
-    let end = Instant::now() + Duration::from_secs(20);
-    let track_id = loop {
-        let newest = truth
-            .lock()
-            .unwrap()
-            .iter()
-            .next_back()
-            .map(|(k, b)| (*k, *b));
-        if let Some((stamp, b)) = newest {
-            let req = bevt_node::convert::reinit_request(
-                b,
-                bevt_msgs::builtin_interfaces::Time::from_nanos(stamp),
-                "",
-            );
-            if gs
-                .reinit(&req, Duration::from_secs(3))
-                .is_some_and(|r| r.success)
-            {
-                let s = wait_status(&gs, Duration::from_secs(5), tracking)
-                    .expect("tracking after reinit");
-                break s.track_id;
-            }
-        }
-        assert!(Instant::now() < end, "the node never started tracking");
-        std::thread::sleep(Duration::from_millis(200));
-    };
+    let r = gs
+        .start_track_on_newest(&truth, Duration::from_secs(30))
+        .expect("reinit answered");
+    assert!(r.success, "{}", r.message);
+    let track_id = wait_status(&gs, Duration::from_secs(5), tracking)
+        .expect("tracking after reinit")
+        .track_id;
 
     // A parameter that shapes the tracker: refused with the reason, old value kept, the
     // node tracking on with the same track.

@@ -25,7 +25,7 @@ use bevt_node::node::security::DdsSecurity;
 use bevt_node::node::sim::{spawn_camera, GroundStation, TruthLog};
 use bevt_tests::{temp_dir, wait_status};
 use ros2_client::{Client, MessageTypeName, NodeName, NodeOptions, Publisher, ServiceTypeName};
-use std::io::Read;
+use std::io::BufRead;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -454,13 +454,26 @@ fn only_the_authorised_ground_station_commands_the_secured_node() {
     let _ = std::fs::remove_dir_all(ks.parent().unwrap());
 }
 
-/// Runs `bevt_node_under_test` with `env` and `args`; after `alive` (or as soon as it exits)
-/// calls `while_alive(still running)`, then stops it: (still running after `alive`,
-/// stderr).
+/// How long a node may take to start or to refuse (generous: a loaded CI machine).
+const START_LIMIT: Duration = Duration::from_secs(60);
+
+/// What the node prints once its endpoints exist and its main loop runs (after every
+/// security check).
+const STARTED: &str = "started: waiting for images";
+
+/// Runs `bevt_node_under_test` with `env` and `args` until it either reaches its main loop
+/// (prints [`STARTED`]) or exits, waiting at most `limit`; calls `while_alive(reached its
+/// main loop)`, then stops it: (reached its main loop, stderr).
+///
+/// Deciding by the line rather than by "still running after a few seconds" keeps the
+/// result right on a loaded machine, where a node that will refuse to start can take
+/// longer than any fixed window to reach its refusal (CI saw an observer-enclave node
+/// still running at 3 s, then exit with "not allowed by security").
+#[allow(clippy::panic)] // a test helper: failing the calling test is the point
 fn start_node(
     env: &[(&str, &str)],
     args: &[&str],
-    alive: Duration,
+    limit: Duration,
     while_alive: impl FnOnce(bool),
 ) -> (bool, String) {
     let exe = env!("CARGO_BIN_EXE_bevt_node_under_test");
@@ -482,25 +495,44 @@ fn start_node(
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let end = Instant::now() + alive;
-    let mut running = true;
-    while Instant::now() < end {
-        if child.try_wait().unwrap().is_some() {
-            running = false;
-            break;
+    // stderr is read line by line on a thread: the lines come to this thread as they
+    // arrive, the whole text at the end.
+    let stderr = child.stderr.take().unwrap();
+    let (tx, lines) = std::sync::mpsc::channel::<String>();
+    let reader = std::thread::spawn(move || {
+        let mut all = String::new();
+        for line in std::io::BufReader::new(stderr).lines() {
+            let Ok(line) = line else { break };
+            let _ = tx.send(line.clone());
+            all.push_str(&line);
+            all.push('\n');
         }
-        std::thread::sleep(Duration::from_millis(50));
-    }
+        all
+    });
+    let end = Instant::now() + limit;
+    let running = loop {
+        match lines.recv_timeout(Duration::from_millis(50)) {
+            Ok(line) if line.contains(STARTED) => break true,
+            Ok(_) | Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+            // stderr closed: the process is ending.
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break false,
+        }
+        if child.try_wait().unwrap().is_some() {
+            break false;
+        }
+        if Instant::now() >= end {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!(
+                "the node neither started nor exited within {limit:?}: {}",
+                reader.join().unwrap()
+            );
+        }
+    };
     while_alive(running);
     drop(child.stdin.take()); // the node stops when its stdin closes
     let status = child.wait().unwrap();
-    let mut err = String::new();
-    child
-        .stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut err)
-        .unwrap();
+    let err = reader.join().unwrap();
     if !running {
         assert!(!status.success(), "exited early with success: {err}");
     }
@@ -509,7 +541,7 @@ fn start_node(
 
 #[test]
 fn start_up_follows_the_ros_security_environment() {
-    let alive = Duration::from_secs(3);
+    let alive = START_LIMIT;
     let none = |_| {};
     // Off (the default): starts, says that it is unauthenticated, and obeys anyone: the
     // unauthenticated commander of the secured test is answered here (the control).
@@ -767,7 +799,7 @@ fn certificate_and_permission_dates_are_checked() {
     let (running, err) = start_node(
         &env,
         &["--ros-args", "--enclave", "/expired_grant"],
-        Duration::from_secs(3),
+        START_LIMIT,
         |_| {},
     );
     println!("security: expired permissions: {}", err.trim());

@@ -310,6 +310,47 @@ impl GroundStation {
         answer
     }
 
+    /// Starts a track on the newest frame the camera published (its truth box and stamp),
+    /// as an operator clicking the live picture would: a refusal that only says the node
+    /// does not have that frame (yet, or any more) is answered by asking again on the then
+    /// newest frame, until `timeout`. Such refusals are expected, not faults: the node
+    /// keeps a bounded buffer of recent frames, and on a loaded machine the first request
+    /// can wait for DDS matching longer than the buffer spans. Any other answer, success
+    /// or refusal, is returned; `None` when no answer came in time.
+    pub fn start_track_on_newest(
+        &self,
+        truth: &TruthLog,
+        timeout: Duration,
+    ) -> Option<ReinitResponse> {
+        let end = Instant::now() + timeout;
+        let mut last = None;
+        while Instant::now() < end {
+            let newest = truth
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .iter()
+                .next_back()
+                .map(|(k, b)| (*k, *b));
+            let Some((stamp, b)) = newest else {
+                std::thread::sleep(Duration::from_millis(50));
+                continue;
+            };
+            let req = crate::convert::reinit_request(b, Time::from_nanos(stamp), "");
+            let left = end.saturating_duration_since(Instant::now());
+            let Some(r) = self.reinit(&req, left) else {
+                break;
+            };
+            let transient = r.message.contains("no buffered frame")
+                || r.message.contains("no camera frame received yet");
+            if r.success || !transient {
+                return Some(r);
+            }
+            last = Some(r);
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        last
+    }
+
     /// Sends one `reinit` request without waiting (for bursts); false when it could not be
     /// sent. Replies are read with [`Self::take_reinit_replies`].
     pub fn send_reinit(&self, req: &ReinitRequest) -> bool {
