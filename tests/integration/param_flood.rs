@@ -86,6 +86,12 @@ fn a_flood_of_huge_describe_requests_leaves_memory_and_boxes_alone() {
             .expect("send");
     }
     // Boxes keep coming while the node digests the flood.
+    let wall_ns = || {
+        let t = bevt_node::node::sim::wall_stamp();
+        i64::from(t.sec) * 1_000_000_000 + i64::from(t.nanosec)
+    };
+    let _ = gs.take_detections(); // the boxes of before the window
+    let window_start = wall_ns();
     let start = Instant::now();
     let (mut last_box, mut longest_gap, mut boxes) = (Instant::now(), Duration::ZERO, 0);
     while start.elapsed() < Duration::from_secs(10) {
@@ -99,9 +105,33 @@ fn a_flood_of_huge_describe_requests_leaves_memory_and_boxes_alone() {
         std::thread::sleep(Duration::from_millis(20));
     }
     longest_gap = longest_gap.max(Instant::now() - last_box);
+    let window_end = wall_ns();
+    // What the camera (a thread of this process, on the same cores) published in the same
+    // window: on a machine loaded by other work it is starved too, and a pause of its
+    // publishing is a pause of boxes that says nothing about the node.
+    let (published, camera_gap) = {
+        let log = truth.lock().expect("truth");
+        let stamps: Vec<i64> = log
+            .range(window_start..window_end)
+            .map(|(k, _)| *k)
+            .collect();
+        let gap = stamps
+            .windows(2)
+            .map(|w| w[1] - w[0])
+            .chain([
+                stamps
+                    .first()
+                    .map_or(window_end - window_start, |f| f - window_start),
+                stamps.last().map_or(0, |l| window_end - l),
+            ])
+            .max()
+            .unwrap_or(0);
+        (stamps.len(), Duration::from_nanos(gap.max(0) as u64))
+    };
     let (rss, peak) = memory(pid);
     println!(
-        "param flood: steady RSS {steady} KiB, after {rss} KiB, peak {peak} KiB; {boxes} boxes in 10 s, longest gap {longest_gap:?}"
+        "param flood: steady RSS {steady} KiB, after {rss} KiB, peak {peak} KiB; {boxes} boxes in 10 s \
+         ({published} frames published), longest gap {longest_gap:?} (the camera's {camera_gap:?})"
     );
     stop.store(true, Ordering::Relaxed);
     let _ = camera.join();
@@ -111,9 +141,14 @@ fn a_flood_of_huge_describe_requests_leaves_memory_and_boxes_alone() {
         peak <= 2 * steady,
         "peak RSS {peak} KiB above twice the steady {steady} KiB"
     );
+    // The node may pause no more than 2 s beyond the camera's own longest pause, and
+    // answer at least 3 of 4 published frames (quiet: 20 Hz, 200 frames, ~200 boxes).
     assert!(
-        longest_gap <= Duration::from_secs(2),
-        "boxes stopped for {longest_gap:?}"
+        longest_gap <= Duration::from_secs(2) + camera_gap,
+        "boxes stopped for {longest_gap:?} (the camera's longest pause {camera_gap:?})"
     );
-    assert!(boxes >= 150, "{boxes} boxes in 10 s at 20 Hz");
+    assert!(
+        published >= 100 && 4 * boxes >= 3 * published,
+        "{boxes} boxes for {published} frames published in 10 s at 20 Hz"
+    );
 }
