@@ -361,6 +361,12 @@ pub struct TrackStateConfig {
     /// Ask the verifier on an unconfident (`uncertain`) frame; a score at or above
     /// `redetection.verifier_threshold` reports it `tracking` (reason: confirmed).
     pub verify_low_confidence: bool,
+    /// Let the first frame's filter, frozen at initialisation, answer a periodic drift
+    /// check: when its confidence on the frame reaches `redetection.reacquire_threshold`
+    /// with its peak within 3 cells of the live filter's, the check agrees without a
+    /// verifier pass. Re-checks, the check after a re-acquisition and low-confidence
+    /// confirmations always ask the verifier.
+    pub drift_anchor: bool,
 }
 
 impl Default for TrackStateConfig {
@@ -373,6 +379,7 @@ impl Default for TrackStateConfig {
             drift_threshold: 4.0,
             drift_recheck_frames: 3,
             verify_low_confidence: true,
+            drift_anchor: true,
         }
     }
 }
@@ -1103,7 +1110,7 @@ mod tests {
                 k.name
             );
         }
-        assert_eq!(live_keys().count(), 23);
+        assert_eq!(live_keys().count(), 24);
     }
 
     #[test]

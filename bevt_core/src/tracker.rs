@@ -20,7 +20,7 @@ use crate::features::{FeatureExtractor, FeatureMap, Hog};
 use crate::fft::{fftshift, Fft2};
 use crate::filter::admm::{AdmmSolver, CropBox};
 use crate::filter::label::{gaussian_label, hann2d, label_sigma, reg_window};
-use crate::filter::peak::{subpixel_peak, NewtonScratch, Peak};
+use crate::filter::peak::{argmax, subpixel_peak, NewtonScratch, Peak};
 use crate::filter::response::{fused_response, LayerSlot};
 use crate::filter::shift::{apply_phase, shift_phase};
 use crate::geometry::{BBox, GridSize, Point2, Size2};
@@ -276,6 +276,9 @@ struct State {
     bins: usize,
     model_xf: Vec<Complex32>,
     g_f: Vec<Complex32>,
+    /// The first frame's filter, frozen at `init`: with `track_state.drift_anchor`, a
+    /// witness of the drift check that costs one response, not a network pass ([`drift`]).
+    anchor_g_f: Vec<Complex32>,
     m_ideal: Vec<f32>,
     m_curr: Vec<f32>,
     resp_f: Vec<Complex32>,
@@ -396,6 +399,47 @@ impl State {
         );
         self.fft.inverse(&self.resp_f, &mut self.resp);
         fftshift(&self.resp, self.geo.grid, &mut self.m_ideal);
+    }
+
+    /// The frozen first-frame filter ([`State::anchor_g_f`]) on the detection features of
+    /// scale `best`: its confidence (the live filter's measure and mapping) and the distance,
+    /// cells, of its peak from the live filter's. `None` without an anchor.
+    fn anchor_evidence(&mut self, best: usize, psr_exclusion: usize) -> Option<(f32, f32)> {
+        if self.anchor_g_f.is_empty() {
+            return None;
+        }
+        let w = &self.workers[best];
+        fused_response(
+            &self.anchor_g_f,
+            &w.xf,
+            &self.layers,
+            self.bins,
+            &mut self.resp_f,
+        );
+        self.fft.inverse(&self.resp_f, &mut self.resp);
+        let grid = self.geo.grid;
+        let (row, col, peak) = argmax(&self.resp, grid);
+        // Displacement from the window centre, cells, as `subpixel_peak` counts it.
+        let wrap = |i: usize, n: usize| {
+            let half = (n - 1) / 2;
+            ((i + half) % n) as f32 - half as f32
+        };
+        let (dy, dx) = (wrap(row, grid.h), wrap(col, grid.w));
+        let live = w.peak;
+        let dist = (dy - live.dy).hypot(dx - live.dx);
+        let m = Measures {
+            peak,
+            psr: psr(&self.resp, grid, psr_exclusion),
+        };
+        let c = self.confidence.confidence(self.confidence.score(m));
+        Some((
+            c,
+            if dist.is_finite() {
+                dist
+            } else {
+                f32::INFINITY
+            },
+        ))
     }
 }
 
@@ -749,6 +793,7 @@ impl BevtTracker {
             bins,
             model_xf: vec![Complex32::default(); channels * bins],
             g_f: vec![Complex32::default(); channels * bins],
+            anchor_g_f: Vec::new(),
             m_ideal: vec![0.0; grid.len()],
             m_curr: vec![0.0; grid.len()],
             resp_f: vec![Complex32::default(); bins],
@@ -901,6 +946,9 @@ impl Tracker for BevtTracker {
         st.training_sample(frame)?;
         st.model_xf.copy_from_slice(&st.workers[0].xf);
         st.train();
+        // Kept whatever `drift_anchor` says, so that switching it on (a live key) works on
+        // the running track.
+        st.anchor_g_f.clone_from(&st.g_f);
         let size = st.target_size();
         if let Some(sf) = st.scale_filter.as_mut() {
             sf.train(frame, st.pos, size)?;
@@ -1017,7 +1065,7 @@ impl Tracker for BevtTracker {
         let decided = st.states.track(confidence);
         let verifier = self.verifier.as_deref_mut();
         let (state, reason, published) =
-            drift::check(st, frame, &self.spec, verifier, decided, confidence)?;
+            drift::check(st, frame, &self.spec, verifier, decided, best, confidence)?;
         // The lost state follows the state machine (the confidence, or a confirmed drift).
         let now = st.states.state();
         if lost::after_decision(st, frame, &self.spec, before, now) {
@@ -1172,6 +1220,59 @@ mod tests {
             *s == TrackState::Uncertain && matches!(r, StateReason::OffTarget { .. })
         };
         assert!(on[hide + 1..].iter().all(drift), "{on:?}");
+    }
+
+    /// Issue 20's speed budget: the first frame's filter, frozen at initialisation, answers
+    /// the periodic drift checks it confirms (`track_state.drift_anchor`), so they cost no
+    /// verifier pass, and it confirms none on a hidden target: with checks every frame, the
+    /// states with and without it are the same frame for frame, and it saves passes on the
+    /// visible frames only (each hidden frame still costs its pass).
+    #[test]
+    fn the_first_frame_filter_answers_drift_checks_only_on_the_visible_target() {
+        const HIDE: usize = 25;
+        let seq = SynthParams {
+            frames: 45,
+            hidden: Some((HIDE, 45)),
+            ..SynthParams::default()
+        };
+        let run = |anchor: bool| {
+            let mut cfg = TrackerConfig::default();
+            cfg.track_state.lost_threshold = 0.0;
+            cfg.track_state.drift_recheck_frames = 0;
+            cfg.track_state.drift_check_frames = 1;
+            cfg.track_state.drift_anchor = anchor;
+            let mut t = started(&seq, &cfg);
+            let mut hidden_passes = 0;
+            let mut states = Vec::new();
+            for i in 1..seq.frames {
+                let f = seq.frame(i);
+                let frame =
+                    Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+                let before = t.verifier_passes().unwrap();
+                let o = t.update(&frame).unwrap();
+                if i > HIDE {
+                    hidden_passes += t.verifier_passes().unwrap() - before;
+                }
+                states.push((o.state, o.reason));
+            }
+            (states, t.verifier_passes().unwrap(), hidden_passes)
+        };
+        let (with, passes_with, hidden_with) = run(true);
+        let (without, passes_without, hidden_without) = run(false);
+        assert_eq!(with, without);
+        let hidden = (seq.frames - HIDE - 1) as u64;
+        assert_eq!(hidden_without, hidden);
+        assert_eq!(
+            hidden_with, hidden,
+            "the frozen filter answered a hidden frame's check"
+        );
+        // Without it every frame is a pass; with it most visible frames are not (the first
+        // check and those after a refused one still ask the verifier).
+        assert_eq!(passes_without, (seq.frames - 1) as u64);
+        assert!(
+            passes_with <= hidden + (HIDE as u64) / 4,
+            "{passes_with} passes with the anchor, {passes_without} without"
+        );
     }
 
     /// Issue 20: with the re-check (`drift_recheck_frames`), a drift the verifier confirms

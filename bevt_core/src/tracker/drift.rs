@@ -15,6 +15,11 @@
 //!   check ends the hold and saves the model as the one a loss on drift goes back to
 //!   ([`super::lost::verified`]). After a re-acquisition the first confident frame is
 //!   checked at once, so a candidate the verifier disputes is soon lost again.
+//! - with `track_state.drift_anchor`, a periodic check with nothing in dispute asks the
+//!   first frame's filter first (frozen at initialisation, like the verifier's template):
+//!   when it finds the target where the live filter does, at the confidence a filter
+//!   window needs to be a re-acquisition candidate, the check agrees without a network
+//!   pass. It never disputes a box: what it does not confirm goes to the verifier.
 //! - with `track_state.verify_low_confidence`, a low-confidence (`uncertain`) frame is
 //!   scored too: at or above `redetection.verifier_threshold` (the bar of a
 //!   re-acquisition) it is reported `tracking` ([`StateReason::Confirmed`]).
@@ -23,7 +28,8 @@
 //! the confidence at `track_state.lost_threshold` sees what the state says: a disputed or
 //! drift-lost box publishes at most `lost_threshold · score / drift_threshold`, a confirmed
 //! one at least `lost_threshold`. The cost is one network pass every `drift_check_frames`
-//! confident frames, one per failed check's re-check, and one per low-confidence frame.
+//! confident frames (none when the frozen filter confirms the box), one per failed check's
+//! re-check, and one per low-confidence frame.
 
 use super::{lost, State};
 use crate::config::TrackerSpec;
@@ -31,6 +37,10 @@ use crate::error::TrackError;
 use crate::image::Frame;
 use crate::redetect::{context_side, Verifier};
 use crate::track_state::{StateReason, TrackState};
+
+/// The frozen filter's peak within this many cells of the live filter's is at the box (as
+/// a re-detection search result within this many cells of its candidate is the candidate).
+const ANCHOR_NEAR_CELLS: f32 = 3.0;
 
 /// Between checks: confident frames since the last check, its result when it disagreed
 /// (the verifier's score), and whether the track is calm: the last check scored at least
@@ -59,6 +69,18 @@ fn score_at_box(
         .map(|s| s.score()))
 }
 
+/// The frozen first-frame filter confirms the box: its confidence on the frame's detection
+/// features (scale `best`) reaches the bar a filter window needs to be a re-acquisition
+/// candidate (`redetection.reacquire_threshold`), and its peak is where the live filter's
+/// is (within [`ANCHOR_NEAR_CELLS`], what the re-detection search counts as one place).
+fn anchor_agrees(st: &mut State, spec: &TrackerSpec, best: usize) -> bool {
+    let bar = spec.config.redetection.reacquire_threshold;
+    match st.anchor_evidence(best, spec.config.confidence.psr_exclusion_cells) {
+        Some((c, dist)) => c >= bar && dist <= ANCHOR_NEAR_CELLS,
+        None => false,
+    }
+}
+
 /// The confidence published with a box the verifier scores `score` below `threshold`:
 /// at most `lost_threshold · score / threshold` (0 for a NaN or negative score).
 fn disputed(confidence: f32, score: f32, threshold: f32, lost_threshold: f32) -> f32 {
@@ -84,6 +106,7 @@ pub(super) fn check(
     spec: &TrackerSpec,
     verifier: Option<&mut (dyn Verifier + 'static)>,
     decided: (TrackState, StateReason),
+    best: usize,
     confidence: f32,
 ) -> Result<Report, TrackError> {
     let t = &spec.config.track_state;
@@ -122,7 +145,16 @@ pub(super) fn check(
         _ => t.drift_check_frames,
     };
     if st.drift.since == 0 || st.drift.since >= every {
+        // A periodic check with nothing in dispute may be answered by the frozen first-frame
+        // filter; the check at once (a new track, after a re-acquisition or any other state)
+        // and the re-check ask the verifier.
+        let periodic = st.drift.since > 0 && st.drift.off.is_none();
         st.drift.since = 0;
+        if periodic && t.drift_anchor && anchor_agrees(st, spec, best) {
+            st.drift.since += 1;
+            lost::verified(st);
+            return Ok(unchanged);
+        }
         match score_at_box(st, frame, v)? {
             Some(s) if s.is_nan() || s < t.drift_threshold => {
                 if st.drift.off.is_some() && t.drift_recheck_frames > 0 {
