@@ -364,8 +364,9 @@ pub struct TrackStateConfig {
     /// Let the first frame's filter, frozen at initialisation, answer a periodic drift
     /// check: when its confidence on the frame reaches `redetection.reacquire_threshold`
     /// with its peak within 3 cells of the live filter's, the check agrees without a
-    /// verifier pass. Re-checks, the check after a re-acquisition and low-confidence
-    /// confirmations always ask the verifier.
+    /// verifier pass. Re-checks, the check at once after any other state (a
+    /// re-acquisition, an uncertain frame) and low-confidence confirmations always ask the
+    /// verifier.
     pub drift_anchor: bool,
 }
 
