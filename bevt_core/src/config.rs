@@ -358,8 +358,9 @@ pub struct TrackStateConfig {
     /// it too makes the track lost on drift. 0: a failed check never makes it lost (it
     /// is re-checked every `drift_check_frames`).
     pub drift_recheck_frames: usize,
-    /// Ask the verifier on an unconfident (`uncertain`) frame; a score at or above
-    /// `redetection.verifier_threshold` reports it `tracking` (reason: confirmed).
+    /// Ask the verifier on an unconfident (`uncertain`) frame; a hit at or above
+    /// `redetection.verifier_threshold` whose centre is at the box (inside it, one cell of
+    /// the verifier's grid to spare) reports it `tracking` (reason: confirmed).
     pub verify_low_confidence: bool,
     /// Let the first frame's filter, frozen at initialisation, answer a periodic drift
     /// check: when its confidence on the frame reaches `redetection.reacquire_threshold`

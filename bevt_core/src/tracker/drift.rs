@@ -21,8 +21,11 @@
 //!   window needs to be a re-acquisition candidate, the check agrees without a network
 //!   pass. It never disputes a box: what it does not confirm goes to the verifier.
 //! - with `track_state.verify_low_confidence`, a low-confidence (`uncertain`) frame is
-//!   scored too: at or above `redetection.verifier_threshold` (the bar of a
-//!   re-acquisition) it is reported `tracking` ([`StateReason::Confirmed`]).
+//!   scored too: when the verifier's hit reaches `redetection.verifier_threshold` (the bar
+//!   of a re-acquisition) *at the box* (its centre inside the box, one cell of the
+//!   verifier's grid to spare), it is reported `tracking` ([`StateReason::Confirmed`]). A
+//!   hit elsewhere in its region (twice the target's context) leaves the frame uncertain:
+//!   a box beside a small target still has the target in view.
 //!
 //! The published confidence follows the reported state, so a ground station thresholding
 //! the confidence at `track_state.lost_threshold` sees what the state says: a disputed or
@@ -34,8 +37,9 @@
 use super::{lost, State};
 use crate::config::TrackerSpec;
 use crate::error::TrackError;
+use crate::geometry::{Point2, Size2};
 use crate::image::Frame;
-use crate::redetect::{context_side, Verifier};
+use crate::redetect::{context_side, Scored, Verifier};
 use crate::track_state::{StateReason, TrackState};
 
 /// The frozen filter's peak within this many cells of the live filter's is at the box (as
@@ -81,6 +85,38 @@ fn anchor_agrees(st: &mut State, spec: &TrackerSpec, best: usize) -> bool {
     }
 }
 
+/// Cells of the verifier's score map across its search region (NanoTrack: 255 px / 16).
+const VERIFIER_CELLS: f32 = 16.0;
+
+/// The verifier's score when it finds the target *at* the box ([`hit_at_box`]): its best
+/// hit in the region around the box (twice the target's context, so a box beside a small
+/// target still has the target in view) reaches `bar`. `None` otherwise: below the bar, a
+/// hit beside the box, or no template.
+fn found_at_box(
+    st: &mut State,
+    frame: &Frame<'_>,
+    v: &mut (dyn Verifier + 'static),
+    bar: f32,
+) -> Result<Option<f32>, TrackError> {
+    let size = st.target_size();
+    let side = 2.0 * context_side(size.w, size.h);
+    st.verifier_passes += 1;
+    let b = st.box_size(st.scale);
+    Ok(match v.search_above(frame, st.pos, side, bar)? {
+        Some(Scored::Hit(h)) if hit_at_box(h.pos, st.pos, b, side / VERIFIER_CELLS) => {
+            Some(h.score)
+        }
+        _ => None,
+    })
+}
+
+/// A verifier hit centred at `hit` is at the box of size `size` centred at `pos`: inside
+/// it, with one cell of the verifier's score map (`cell` pixels) to spare on each side, as
+/// the hit's position is read off that grid. False for non-finite input.
+fn hit_at_box(hit: Point2, pos: Point2, size: Size2, cell: f32) -> bool {
+    (hit.x - pos.x).abs() <= 0.5 * size.w + cell && (hit.y - pos.y).abs() <= 0.5 * size.h + cell
+}
+
 /// The confidence published with a box the verifier scores `score` below `threshold`:
 /// at most `lost_threshold · score / threshold` (0 for a NaN or negative score).
 fn disputed(confidence: f32, score: f32, threshold: f32, lost_threshold: f32) -> f32 {
@@ -120,8 +156,8 @@ pub(super) fn check(
         (TrackState::Uncertain, StateReason::LowConfidence { .. }) if t.verify_low_confidence => {
             st.drift = DriftCheck::default();
             let bar = spec.config.redetection.verifier_threshold;
-            return Ok(match score_at_box(st, frame, v)? {
-                Some(s) if s >= bar => {
+            return Ok(match found_at_box(st, frame, v, bar)? {
+                Some(s) => {
                     let (state, reason) = st.states.confirmed(confidence, s);
                     (state, reason, confidence.max(t.lost_threshold))
                 }
@@ -191,7 +227,23 @@ pub(super) fn check(
 
 #[cfg(test)]
 mod tests {
-    use super::disputed;
+    use super::{disputed, hit_at_box};
+    use crate::geometry::{Point2, Size2};
+
+    #[test]
+    fn a_hit_is_at_the_box_inside_it_or_within_one_cell_of_its_edge() {
+        let pos = Point2 { x: 100.0, y: 50.0 };
+        let size = Size2 { w: 20.0, h: 10.0 };
+        let at = |x, y| hit_at_box(Point2 { x, y }, pos, size, 4.0);
+        assert!(at(100.0, 50.0));
+        assert!(at(110.0, 55.0)); // the corner
+        assert!(at(114.0, 59.0)); // one cell beyond it
+        assert!(!at(114.5, 50.0));
+        assert!(!at(100.0, 40.5));
+        assert!(!at(80.0, 50.0)); // a box width beside it
+        assert!(!at(f32::NAN, 50.0));
+        assert!(!hit_at_box(pos, pos, size, f32::NAN));
+    }
 
     #[test]
     fn a_disputed_box_publishes_a_confidence_below_the_lost_threshold_by_its_score() {
