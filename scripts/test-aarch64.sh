@@ -158,8 +158,8 @@ done
 # qemu then emulates instruction by instruction: the first seven took 53-623 s each, about 20
 # minutes together (2026-11-25), the three added since (box_refine, the head split) each ran
 # over 5 minutes (2026-11-26), against about 40 s for the other 137 (docs/testing.md#ci); the
-# drift anchor's test (2026-11-27) runs the verifier on 65 frames, as the drift tests do. They run natively in `cargo test --workspace`; on aarch64,
-# tract's arm64 kernels are exercised by the eval below, whose default configuration runs
+# drift anchor's test (2026-11-27) runs the verifier on 65 frames, as the drift tests do.
+# They run natively in `cargo test --workspace`; on aarch64, tract's arm64 kernels are exercised by the eval below, whose default configuration runs
 # the NanoTrack drift check every 15 confident frames and whose boxes and states must match.
 skipped=(
   tracker::tests::a_confirmed_drift_makes_the_track_lost_with_its_reason

@@ -20,7 +20,7 @@ use crate::features::{FeatureExtractor, FeatureMap, Hog};
 use crate::fft::{fftshift, Fft2};
 use crate::filter::admm::{AdmmSolver, CropBox};
 use crate::filter::label::{gaussian_label, hann2d, label_sigma, reg_window};
-use crate::filter::peak::{argmax, subpixel_peak, NewtonScratch, Peak};
+use crate::filter::peak::{argmax, displacement, subpixel_peak, NewtonScratch, Peak};
 use crate::filter::response::{fused_response, LayerSlot};
 use crate::filter::shift::{apply_phase, shift_phase};
 use crate::geometry::{BBox, GridSize, Point2, Size2};
@@ -403,7 +403,8 @@ impl State {
 
     /// The frozen first-frame filter ([`State::anchor_g_f`]) on the detection features of
     /// scale `best`: its confidence (the live filter's measure and mapping) and the distance,
-    /// cells, of its peak from the live filter's. `None` without an anchor.
+    /// cells, of its peak from the live filter's (NaN when the live peak is). `None`
+    /// without an anchor.
     fn anchor_evidence(&mut self, best: usize, psr_exclusion: usize) -> Option<(f32, f32)> {
         if self.anchor_g_f.is_empty() {
             return None;
@@ -419,27 +420,13 @@ impl State {
         self.fft.inverse(&self.resp_f, &mut self.resp);
         let grid = self.geo.grid;
         let (row, col, peak) = argmax(&self.resp, grid);
-        // Displacement from the window centre, cells, as `subpixel_peak` counts it.
-        let wrap = |i: usize, n: usize| {
-            let half = (n - 1) / 2;
-            ((i + half) % n) as f32 - half as f32
-        };
-        let (dy, dx) = (wrap(row, grid.h), wrap(col, grid.w));
-        let live = w.peak;
-        let dist = (dy - live.dy).hypot(dx - live.dx);
+        let (dy, dx) = (displacement(row, grid.h), displacement(col, grid.w));
+        let dist = (dy - w.peak.dy).hypot(dx - w.peak.dx);
         let m = Measures {
             peak,
             psr: psr(&self.resp, grid, psr_exclusion),
         };
-        let c = self.confidence.confidence(self.confidence.score(m));
-        Some((
-            c,
-            if dist.is_finite() {
-                dist
-            } else {
-                f32::INFINITY
-            },
-        ))
+        Some((self.confidence.confidence(self.confidence.score(m)), dist))
     }
 }
 
@@ -1175,6 +1162,15 @@ mod tests {
             .collect()
     }
 
+    /// The default synthetic scene, `frames` long, its target hidden from frame `hide` on.
+    fn hidden_from(hide: usize, frames: usize) -> SynthParams {
+        SynthParams {
+            frames,
+            hidden: Some((hide, frames)),
+            ..SynthParams::default()
+        }
+    }
+
     /// Issue 20: a box left on background while the confidence gives no warning (here the
     /// confidence rule is off: `lost_threshold` 0) is flagged by the drift check alone, and
     /// only once the target has gone: occluded in a small frame, and a small target gone
@@ -1182,11 +1178,7 @@ mod tests {
     #[test]
     fn the_drift_check_flags_a_box_left_on_background() {
         const HIDE: usize = 25;
-        let occluded = SynthParams {
-            frames: 45,
-            hidden: Some((HIDE, 45)),
-            ..SynthParams::default()
-        };
+        let occluded = hidden_from(HIDE, 45);
         let gone = SynthParams {
             width: 960,
             height: 540,
@@ -1230,11 +1222,7 @@ mod tests {
     #[test]
     fn the_first_frame_filter_answers_drift_checks_only_on_the_visible_target() {
         const HIDE: usize = 25;
-        let seq = SynthParams {
-            frames: 45,
-            hidden: Some((HIDE, 45)),
-            ..SynthParams::default()
-        };
+        let seq = hidden_from(HIDE, 45);
         let run = |anchor: bool| {
             let mut cfg = TrackerConfig::default();
             cfg.track_state.lost_threshold = 0.0;
@@ -1286,11 +1274,7 @@ mod tests {
     #[test]
     fn a_confirmed_drift_makes_the_track_lost_with_its_reason() {
         const HIDE: usize = 25;
-        let seq = SynthParams {
-            frames: 45,
-            hidden: Some((HIDE, 45)),
-            ..SynthParams::default()
-        };
+        let seq = hidden_from(HIDE, 45);
         let mut cfg = TrackerConfig::default();
         cfg.track_state.lost_threshold = 0.0;
         cfg.track_state.drift_check_frames = 5;

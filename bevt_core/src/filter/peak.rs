@@ -44,6 +44,14 @@ pub fn argmax(map: &[f32], grid: GridSize) -> (usize, usize, f32) {
     (best.0 / grid.w, best.0 % grid.w, best.1)
 }
 
+/// Displacement, cells, of index `i` of an `n`-long unshifted response axis from the
+/// window centre (index 0), wrapped into `[−(n−1)/2, n/2]`: the integer peak
+/// [`subpixel_peak`] starts from.
+pub fn displacement(i: usize, n: usize) -> f32 {
+    let half = n.saturating_sub(1) / 2;
+    ((i + half) % n.max(1)) as f32 - half as f32
+}
+
 /// Sub-cell peak of a response given spatially (`resp`, row-major, as `ifft2`) and as its
 /// half spectrum (`resp_f`, layout of [`crate::fft`]).
 ///
@@ -60,12 +68,8 @@ pub fn subpixel_peak(
     let (h, w) = (grid.h, grid.w);
     let wc = w / 2 + 1;
     let (row, col, init_score) = argmax(resp, grid);
-    let wrap = |i: usize, n: usize| {
-        let half = (n - 1) / 2;
-        ((i + half) % n) as f32 - half as f32
-    };
-    let y0 = 2.0 * PI * wrap(row, h) / h as f32;
-    let x0 = 2.0 * PI * wrap(col, w) / w as f32;
+    let y0 = 2.0 * PI * displacement(row, h) / h as f32;
+    let x0 = 2.0 * PI * displacement(col, w) / w as f32;
     scratch.a0.resize(h, Complex32::default());
     scratch.a1.resize(h, Complex32::default());
     scratch.a2.resize(h, Complex32::default());
