@@ -1263,6 +1263,93 @@ mod tests {
         );
     }
 
+    /// A verifier that disputes every box: its best hit is always at the region's centre
+    /// with score 1 (below `drift_threshold` and `verifier_threshold`), as the real one
+    /// scores a target whose appearance it no longer recognises (e.g. re-lit).
+    #[derive(Debug)]
+    struct Disputing;
+
+    impl Verifier for Disputing {
+        fn set_template(
+            &mut self,
+            _: &Frame<'_>,
+            _: Point2,
+            _: f32,
+            _: f32,
+        ) -> Result<(), TrackError> {
+            Ok(())
+        }
+
+        fn search(
+            &mut self,
+            _: &Frame<'_>,
+            center: Point2,
+            side: f32,
+        ) -> Result<Option<crate::redetect::VerifierHit>, TrackError> {
+            Ok(Some(crate::redetect::VerifierHit {
+                pos: center,
+                w: side / 4.0,
+                h: side / 4.0,
+                score: 1.0,
+            }))
+        }
+    }
+
+    /// Issue 20, "uncertain when evidence conflicts": a verifier that disputes a target the
+    /// first frame's filter still finds at the box (visible all along) keeps the track
+    /// `uncertain` (off target) and re-checks it, with `drift_anchor`; without it the
+    /// failed re-check makes the track lost on drift. The confidence rule is off
+    /// (`lost_threshold` 0), so only the drift check can lose it.
+    #[test]
+    fn a_verifier_dispute_the_first_frame_filter_contradicts_stays_uncertain() {
+        let seq = SynthParams {
+            frames: 40,
+            ..SynthParams::default()
+        };
+        let run = |anchor: bool| {
+            let mut cfg = TrackerConfig::default();
+            cfg.track_state.lost_threshold = 0.0;
+            cfg.track_state.drift_check_frames = 5;
+            cfg.track_state.drift_recheck_frames = 2;
+            cfg.track_state.drift_anchor = anchor;
+            let mut t = BevtTracker::new(cfg.validate().unwrap());
+            t.verifier = Some(Box::new(Disputing));
+            let f0 = seq.frame(0);
+            let frame = Frame::packed(&f0.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+            t.init(&frame, f0.truth).unwrap();
+            (1..seq.frames)
+                .map(|i| {
+                    let f = seq.frame(i);
+                    let frame =
+                        Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+                    let o = t.update(&frame).unwrap();
+                    (o.state, o.reason)
+                })
+                .collect::<Vec<_>>()
+        };
+        let with = run(true);
+        assert!(with.iter().all(|(s, _)| *s != TrackState::Lost), "{with:?}");
+        let disputed = with
+            .iter()
+            .filter(|(s, r)| {
+                *s == TrackState::Uncertain && matches!(r, StateReason::OffTarget { .. })
+            })
+            .count();
+        // Checked at once on the first frame, then re-checked every 2 frames: all but the
+        // first frame are disputed.
+        assert!(disputed + 1 >= with.len(), "{with:?}");
+        let without = run(false);
+        let lost = without
+            .iter()
+            .position(|(s, _)| *s == TrackState::Lost)
+            .expect("never lost without the first frame's filter");
+        assert!(
+            matches!(without[lost].1, StateReason::Drifted { frames: 1, .. }),
+            "{without:?}"
+        );
+        assert!(lost <= 4, "lost at {lost}: {without:?}");
+    }
+
     /// Issue 20: with the re-check (`drift_recheck_frames`), a drift the verifier confirms
     /// makes the track lost with its reason, the confidence rule being off
     /// (`lost_threshold` 0): checks every 5 frames, re-checks 2 frames after a failure, so
