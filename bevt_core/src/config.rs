@@ -367,8 +367,7 @@ pub struct TrackStateConfig {
     /// with its peak within 3 cells of the live filter's, the check agrees without a
     /// verifier pass. Re-checks, the check at once after any other state (a
     /// re-acquisition, an uncertain frame) and low-confidence confirmations always ask the
-    /// verifier. A failed re-check the frozen filter confirms (the same test) leaves the
-    /// box `uncertain` and re-checked instead of lost: the witnesses conflict.
+    /// verifier.
     pub drift_anchor: bool,
 }
 

@@ -1295,15 +1295,18 @@ mod tests {
         }
     }
 
-    /// Issue 20, "uncertain when evidence conflicts": a verifier that disputes a target the
-    /// first frame's filter still finds at the box (visible all along) keeps the track
-    /// `uncertain` (off target) and re-checks it, with `drift_anchor`; without it the
-    /// failed re-check makes the track lost on drift. The confidence rule is off
-    /// (`lost_threshold` 0), so only the drift check can lose it.
+    /// The first frame's filter may confirm a box, never overrule the verifier: a re-check
+    /// the verifier fails makes the track lost on drift even while the frozen filter finds
+    /// a target at the box (visible all along here). Holding such a dispute at `uncertain`
+    /// was measured and refused: under `blur=2` the frozen filter "confirms" truck4_1's box
+    /// on blurred background and the confidence's ROC-AUC fell from 0.873 to 0.650
+    /// (docs/states.md). The confidence rule is off (`lost_threshold` 0), so only the drift
+    /// check can lose the track; with and without the anchor it is lost within the first
+    /// check and its re-check.
     #[test]
-    fn a_verifier_dispute_the_first_frame_filter_contradicts_stays_uncertain() {
+    fn a_verifier_dispute_makes_the_track_lost_whatever_the_first_frame_filter_says() {
         let seq = SynthParams {
-            frames: 40,
+            frames: 20,
             ..SynthParams::default()
         };
         let run = |anchor: bool| {
@@ -1317,7 +1320,7 @@ mod tests {
             let f0 = seq.frame(0);
             let frame = Frame::packed(&f0.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
             t.init(&frame, f0.truth).unwrap();
-            (1..seq.frames)
+            let out: Vec<_> = (1..seq.frames)
                 .map(|i| {
                     let f = seq.frame(i);
                     let frame =
@@ -1325,29 +1328,26 @@ mod tests {
                     let o = t.update(&frame).unwrap();
                     (o.state, o.reason)
                 })
-                .collect::<Vec<_>>()
+                .collect();
+            // The first frame is checked at once and disputed; the re-check 2 frames later
+            // confirms the drift.
+            assert!(
+                matches!(
+                    out[0],
+                    (TrackState::Uncertain, StateReason::OffTarget { .. })
+                ),
+                "{out:?}"
+            );
+            assert!(
+                matches!(
+                    out[2],
+                    (TrackState::Lost, StateReason::Drifted { frames: 1, .. })
+                ),
+                "anchor {anchor}: {out:?}"
+            );
         };
-        let with = run(true);
-        assert!(with.iter().all(|(s, _)| *s != TrackState::Lost), "{with:?}");
-        let disputed = with
-            .iter()
-            .filter(|(s, r)| {
-                *s == TrackState::Uncertain && matches!(r, StateReason::OffTarget { .. })
-            })
-            .count();
-        // Checked at once on the first frame, then re-checked every 2 frames: all but the
-        // first frame are disputed.
-        assert!(disputed + 1 >= with.len(), "{with:?}");
-        let without = run(false);
-        let lost = without
-            .iter()
-            .position(|(s, _)| *s == TrackState::Lost)
-            .expect("never lost without the first frame's filter");
-        assert!(
-            matches!(without[lost].1, StateReason::Drifted { frames: 1, .. }),
-            "{without:?}"
-        );
-        assert!(lost <= 4, "lost at {lost}: {without:?}");
+        run(true);
+        run(false);
     }
 
     /// Issue 20: with the re-check (`drift_recheck_frames`), a drift the verifier confirms

@@ -19,10 +19,7 @@
 //!   first frame's filter first (frozen at initialisation, like the verifier's template):
 //!   when it finds the target where the live filter does, at the confidence a filter
 //!   window needs to be a re-acquisition candidate, the check agrees without a network
-//!   pass. It never disputes a box: what it does not confirm goes to the verifier. When
-//!   the verifier fails a re-check that the first frame's filter confirms (the same test),
-//!   the witnesses conflict: the box stays `uncertain` and is re-checked again, instead of
-//!   being lost on drift.
+//!   pass. It never disputes a box: what it does not confirm goes to the verifier.
 //! - with `track_state.verify_low_confidence`, a low-confidence (`uncertain`) frame is
 //!   scored too: when the verifier's hit reaches `redetection.verifier_threshold` (the bar
 //!   of a re-acquisition) *at the box* (its centre inside the box, one cell of the
@@ -196,13 +193,7 @@ pub(super) fn check(
         }
         match score_at_box(st, frame, v)? {
             Some(s) if s.is_nan() || s < t.drift_threshold => {
-                // A failed re-check confirms the drift, unless the frozen first-frame filter
-                // finds the target at the box: the witnesses then conflict, and the box
-                // stays `uncertain` (re-checked again) instead of being lost.
-                let confirmed = st.drift.off.is_some()
-                    && t.drift_recheck_frames > 0
-                    && !(t.drift_anchor && anchor_agrees(st, spec, best));
-                if confirmed {
+                if st.drift.off.is_some() && t.drift_recheck_frames > 0 {
                     st.drift = DriftCheck::default();
                     let (state, reason) = st.states.drift_lost(s, t.drift_threshold);
                     let c = disputed(confidence, s, t.drift_threshold, t.lost_threshold);
