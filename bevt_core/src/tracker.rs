@@ -1131,7 +1131,17 @@ mod tests {
     use crate::Tracker;
 
     fn started(seq: &SynthParams, cfg: &TrackerConfig) -> BevtTracker {
+        started_with(seq, cfg, None)
+    }
+
+    /// As [`started`], with `verifier` instead of the one the configuration names.
+    fn started_with(
+        seq: &SynthParams,
+        cfg: &TrackerConfig,
+        verifier: Option<Box<dyn Verifier>>,
+    ) -> BevtTracker {
         let mut t = BevtTracker::new(cfg.validate().unwrap());
+        t.verifier = verifier;
         let f0 = seq.frame(0);
         let frame = Frame::packed(&f0.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
         t.init(&frame, f0.truth).unwrap();
@@ -1163,6 +1173,18 @@ mod tests {
     }
 
     /// The default synthetic scene, `frames` long, its target hidden from frame `hide` on.
+    /// The default with only the drift check able to lose the track (`lost_threshold` 0):
+    /// checks every `check` confident frames, re-checks `recheck` frames after a failure,
+    /// the first frame's filter as the first witness when `anchor`.
+    fn drift_only(check: usize, recheck: usize, anchor: bool) -> TrackerConfig {
+        let mut cfg = TrackerConfig::default();
+        cfg.track_state.lost_threshold = 0.0;
+        cfg.track_state.drift_check_frames = check;
+        cfg.track_state.drift_recheck_frames = recheck;
+        cfg.track_state.drift_anchor = anchor;
+        cfg
+    }
+
     fn hidden_from(hide: usize, frames: usize) -> SynthParams {
         SynthParams {
             frames,
@@ -1192,10 +1214,7 @@ mod tests {
     }
 
     fn drift_flags_only_the_hidden_frames(seq: &SynthParams, hide: usize) {
-        let mut cfg = TrackerConfig::default();
-        cfg.track_state.lost_threshold = 0.0;
-        cfg.track_state.drift_recheck_frames = 0;
-        cfg.track_state.drift_check_frames = 0;
+        let mut cfg = drift_only(0, 0, TrackerConfig::default().track_state.drift_anchor);
         let off = states(seq, &cfg);
         assert!(off.iter().all(|(s, _)| *s == TrackState::Tracking));
         cfg.track_state.drift_check_frames = 1;
@@ -1224,12 +1243,7 @@ mod tests {
         const HIDE: usize = 25;
         let seq = hidden_from(HIDE, 45);
         let run = |anchor: bool| {
-            let mut cfg = TrackerConfig::default();
-            cfg.track_state.lost_threshold = 0.0;
-            cfg.track_state.drift_recheck_frames = 0;
-            cfg.track_state.drift_check_frames = 1;
-            cfg.track_state.drift_anchor = anchor;
-            let mut t = started(&seq, &cfg);
+            let mut t = started(&seq, &drift_only(1, 0, anchor));
             let mut hidden_passes = 0;
             let mut states = Vec::new();
             for i in 1..seq.frames {
@@ -1310,16 +1324,8 @@ mod tests {
             ..SynthParams::default()
         };
         let run = |anchor: bool| {
-            let mut cfg = TrackerConfig::default();
-            cfg.track_state.lost_threshold = 0.0;
-            cfg.track_state.drift_check_frames = 5;
-            cfg.track_state.drift_recheck_frames = 2;
-            cfg.track_state.drift_anchor = anchor;
-            let mut t = BevtTracker::new(cfg.validate().unwrap());
-            t.verifier = Some(Box::new(Disputing));
-            let f0 = seq.frame(0);
-            let frame = Frame::packed(&f0.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
-            t.init(&frame, f0.truth).unwrap();
+            let cfg = drift_only(5, 2, anchor);
+            let mut t = started_with(&seq, &cfg, Some(Box::new(Disputing)));
             let out: Vec<_> = (1..seq.frames)
                 .map(|i| {
                     let f = seq.frame(i);
@@ -1362,11 +1368,7 @@ mod tests {
     fn a_confirmed_drift_makes_the_track_lost_with_its_reason() {
         const HIDE: usize = 25;
         let seq = hidden_from(HIDE, 45);
-        let mut cfg = TrackerConfig::default();
-        cfg.track_state.lost_threshold = 0.0;
-        cfg.track_state.drift_check_frames = 5;
-        cfg.track_state.drift_recheck_frames = 2;
-        let mut t = started(&seq, &cfg);
+        let mut t = started(&seq, &drift_only(5, 2, true));
         let out: Vec<TrackOutput> = (1..seq.frames)
             .map(|i| {
                 let f = seq.frame(i);
