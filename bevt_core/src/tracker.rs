@@ -1160,7 +1160,11 @@ mod tests {
 
     /// States and reasons of frames 1.. of `seq` tracked with `cfg`.
     fn states(seq: &SynthParams, cfg: &TrackerConfig) -> Vec<(TrackState, StateReason)> {
-        let mut t = started(seq, cfg);
+        states_of(&mut started(seq, cfg), seq)
+    }
+
+    /// States and reasons of frames 1.. of `seq` tracked by `t` (started on frame 0).
+    fn states_of(t: &mut BevtTracker, seq: &SynthParams) -> Vec<(TrackState, StateReason)> {
         (1..seq.frames)
             .map(|i| {
                 let f = seq.frame(i);
@@ -1326,15 +1330,7 @@ mod tests {
         let run = |anchor: bool| {
             let cfg = drift_only(5, 2, anchor);
             let mut t = started_with(&seq, &cfg, Some(Box::new(Disputing)));
-            let out: Vec<_> = (1..seq.frames)
-                .map(|i| {
-                    let f = seq.frame(i);
-                    let frame =
-                        Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
-                    let o = t.update(&frame).unwrap();
-                    (o.state, o.reason)
-                })
-                .collect();
+            let out = states_of(&mut t, &seq);
             // The first frame is checked at once and disputed; the re-check 2 frames later
             // confirms the drift.
             assert!(
