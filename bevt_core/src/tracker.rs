@@ -1176,7 +1176,6 @@ mod tests {
             .collect()
     }
 
-    /// The default synthetic scene, `frames` long, its target hidden from frame `hide` on.
     /// The default with only the drift check able to lose the track (`lost_threshold` 0):
     /// checks every `check` confident frames, re-checks `recheck` frames after a failure,
     /// the first frame's filter as the first witness when `anchor`.
@@ -1189,6 +1188,7 @@ mod tests {
         cfg
     }
 
+    /// The default synthetic scene, `frames` long, its target hidden from frame `hide` on.
     fn hidden_from(hide: usize, frames: usize) -> SynthParams {
         SynthParams {
             frames,
@@ -1218,7 +1218,7 @@ mod tests {
     }
 
     fn drift_flags_only_the_hidden_frames(seq: &SynthParams, hide: usize) {
-        let mut cfg = drift_only(0, 0, TrackerConfig::default().track_state.drift_anchor);
+        let mut cfg = drift_only(0, 0, true);
         let off = states(seq, &cfg);
         assert!(off.iter().all(|(s, _)| *s == TrackState::Tracking));
         cfg.track_state.drift_check_frames = 1;
@@ -1281,6 +1281,8 @@ mod tests {
         );
     }
 
+    use crate::redetect::VerifierHit;
+
     /// A verifier that disputes every box: its best hit is always at the region's centre
     /// with score 1 (below `drift_threshold` and `verifier_threshold`), as the real one
     /// scores a target whose appearance it no longer recognises (e.g. re-lit).
@@ -1303,8 +1305,8 @@ mod tests {
             _: &Frame<'_>,
             center: Point2,
             side: f32,
-        ) -> Result<Option<crate::redetect::VerifierHit>, TrackError> {
-            Ok(Some(crate::redetect::VerifierHit {
+        ) -> Result<Option<VerifierHit>, TrackError> {
+            Ok(Some(VerifierHit {
                 pos: center,
                 w: side / 4.0,
                 h: side / 4.0,

@@ -59,6 +59,13 @@ pub(super) struct DriftCheck {
 /// What a tracked frame reports: state, reason and the published confidence.
 pub(super) type Report = (TrackState, StateReason, f32);
 
+/// Side, pixels, of the verifier's search region around the box: twice the target's
+/// context, so a box beside a small target still has the target in view.
+fn region_side(st: &State) -> f32 {
+    let size = st.target_size();
+    2.0 * context_side(size.w, size.h)
+}
+
 /// The verifier's best score around the box (`None`: no template, nothing to witness):
 /// the score alone, no box regression.
 fn score_at_box(
@@ -66,8 +73,7 @@ fn score_at_box(
     frame: &Frame<'_>,
     v: &mut (dyn Verifier + 'static),
 ) -> Result<Option<f32>, TrackError> {
-    let size = st.target_size();
-    let side = 2.0 * context_side(size.w, size.h);
+    let side = region_side(st);
     st.verifier_passes += 1;
     Ok(v.search_above(frame, st.pos, side, f32::INFINITY)?
         .map(|s| s.score()))
@@ -89,17 +95,15 @@ fn anchor_agrees(st: &mut State, spec: &TrackerSpec, best: usize) -> bool {
 const VERIFIER_CELLS: f32 = 16.0;
 
 /// The verifier's score when it finds the target *at* the box ([`hit_at_box`]): its best
-/// hit in the region around the box (twice the target's context, so a box beside a small
-/// target still has the target in view) reaches `bar`. `None` otherwise: below the bar, a
-/// hit beside the box, or no template.
+/// hit in the region around the box ([`region_side`]) reaches `bar`. `None` otherwise:
+/// below the bar, a hit beside the box, or no template.
 fn found_at_box(
     st: &mut State,
     frame: &Frame<'_>,
     v: &mut (dyn Verifier + 'static),
     bar: f32,
 ) -> Result<Option<f32>, TrackError> {
-    let size = st.target_size();
-    let side = 2.0 * context_side(size.w, size.h);
+    let side = region_side(st);
     st.verifier_passes += 1;
     let b = st.box_size(st.scale);
     Ok(match v.search_above(frame, st.pos, side, bar)? {
