@@ -39,6 +39,10 @@ pub struct Hog {
     hist: Vec<f32>,
     energy: Vec<f32>,
     norm: Vec<f32>,
+    /// Each cell's four block normalisers, `[4][cell]`.
+    quad: Vec<f32>,
+    /// Texture channel sums, `[4][cell]`.
+    tex: Vec<f32>,
     col_bin: Vec<(usize, usize, f32, f32)>,
     mag: Vec<f32>,
     bin: Vec<u8>,
@@ -119,6 +123,8 @@ impl Hog {
             hist: Vec::new(),
             energy: Vec::new(),
             norm: Vec::new(),
+            quad: Vec::new(),
+            tex: Vec::new(),
             col_bin: Vec::new(),
             mag: Vec::new(),
             bin: Vec::new(),
@@ -299,8 +305,10 @@ impl Hog {
         }
     }
 
-    /// Histograms `hist[cy][cx][o]` (18 sensitive bins, cell-major so a pixel's four votes
-    /// touch four short runs) with bilinear spatial voting.
+    /// Histograms `hist[o][cy][cx]` (18 sensitive bins, orientation-major, so the
+    /// per-cell arithmetic below runs along contiguous cells) with bilinear spatial voting.
+    /// Each bin receives its votes in pixel order whatever the layout, so the sums are the
+    /// same bits in either.
     fn histograms(&mut self, side: usize, cell: usize, hb: usize, wb: usize) {
         let nb = hb * wb;
         let no = 2 * ORIENTATIONS;
@@ -337,28 +345,29 @@ impl Hog {
             let brow = &self.bin[y * side..];
             for (x, &(x0, x1, wx0, wx1)) in self.col_bin.iter().enumerate() {
                 let m = mrow[x] * norm;
-                let o = brow[x] as usize;
+                let o = brow[x] as usize * nb;
                 let (a, b) = (m * wy0, m * wy1);
-                self.hist[(r0 + x0) * no + o] += a * wx0;
-                self.hist[(r0 + x1) * no + o] += a * wx1;
-                self.hist[(r1 + x0) * no + o] += b * wx0;
-                self.hist[(r1 + x1) * no + o] += b * wx1;
+                self.hist[o + r0 + x0] += a * wx0;
+                self.hist[o + r0 + x1] += a * wx1;
+                self.hist[o + r1 + x0] += b * wx0;
+                self.hist[o + r1 + x1] += b * wx1;
             }
         }
     }
 
-    /// Block normalisers `norm[(hb+1) × (wb+1)]` from the insensitive histograms.
+    /// Block normalisers `norm[(hb+1) × (wb+1)]` from the insensitive histograms, then
+    /// each cell's four (`quad[k·nb + cell]`, `k` as in the channel formulas).
     fn normalisers(&mut self, cell: usize, hb: usize, wb: usize) {
         let nb = hb * wb;
         self.energy.clear();
         self.energy.resize(nb, 0.0);
-        for (e, h) in self
-            .energy
-            .iter_mut()
-            .zip(self.hist.chunks_exact(2 * ORIENTATIONS))
-        {
-            for o in 0..ORIENTATIONS {
-                let v = h[o] + h[o + ORIENTATIONS];
+        for o in 0..ORIENTATIONS {
+            let (a, b) = (
+                &self.hist[o * nb..(o + 1) * nb],
+                &self.hist[(o + ORIENTATIONS) * nb..(o + ORIENTATIONS + 1) * nb],
+            );
+            for ((e, &a), &b) in self.energy.iter_mut().zip(a).zip(b) {
+                let v = a + b;
                 *e += v * v;
             }
         }
@@ -377,6 +386,16 @@ impl Hog {
                 let e = |y: usize, x: usize| self.energy[y.min(hb - 1) * wb + x.min(wb - 1)];
                 let s = e(bi, bj) + e(bi, bj + 1) + e(bi + 1, bj) + e(bi + 1, bj + 1);
                 self.norm[i * wb1 + j] = 1.0 / (s + eps).sqrt();
+            }
+        }
+        // Cell (cy, cx) takes the normalisers of its four blocks: below right, above right,
+        // below left, above left.
+        self.quad.clear();
+        self.quad.resize(4 * nb, 0.0);
+        for (k, (dy, dx)) in [(1, 1), (0, 1), (1, 0), (0, 0)].into_iter().enumerate() {
+            for cy in 0..hb {
+                let src = &self.norm[(cy + dy) * wb1 + dx..(cy + dy) * wb1 + dx + wb];
+                self.quad[k * nb + cy * wb..k * nb + (cy + 1) * wb].copy_from_slice(src);
             }
         }
     }
@@ -420,37 +439,53 @@ impl FeatureExtractor for Hog {
         self.gradients(patch);
         self.histograms(patch.side, cell, hb, wb);
         self.normalisers(cell, hb, wb);
-        let wb1 = wb + 1;
         let no = 2 * ORIENTATIONS;
-        for cy in 0..hb {
-            for cx in 0..wb {
-                let i = cy * wb + cx;
-                let n = [
-                    self.norm[(cy + 1) * wb1 + cx + 1],
-                    self.norm[cy * wb1 + cx + 1],
-                    self.norm[(cy + 1) * wb1 + cx],
-                    self.norm[cy * wb1 + cx],
-                ];
-                let mut tex = [0.0f32; 4];
-                let hc = &self.hist[i * no..(i + 1) * no];
-                for o in 0..no {
-                    let h = hc[o];
-                    let mut acc = 0.0;
-                    for (k, nk) in n.iter().enumerate() {
-                        let t = (h * nk).min(CLIP);
-                        acc += t;
-                        tex[k] += t;
-                    }
-                    out.data[o * nb + i] = 0.5 * acc;
-                }
-                for o in 0..ORIENTATIONS {
-                    let h = hc[o] + hc[o + ORIENTATIONS];
-                    let acc: f32 = n.iter().map(|nk| (h * nk).min(CLIP)).sum();
-                    out.data[(no + o) * nb + i] = 0.5 * acc;
-                }
-                for (k, t) in tex.iter().enumerate() {
-                    out.data[(3 * ORIENTATIONS + k) * nb + i] = TEXTURE_WEIGHT * t;
-                }
+        // Channel by channel along the cells (vectorises): value `0.5·Σ_k min(h·n_k, 0.2)`,
+        // the sensitive bins' terms also summed per `k` over the bins into the texture
+        // channels; the same additions in the same order as cell by cell.
+        let (n0, rest) = self.quad.split_at(nb);
+        let (n1, rest) = rest.split_at(nb);
+        let (n2, n3) = rest.split_at(nb);
+        self.tex.clear();
+        self.tex.resize(4 * nb, 0.0);
+        let (t0, rest) = self.tex.split_at_mut(nb);
+        let (t1, rest) = rest.split_at_mut(nb);
+        let (t2, t3) = rest.split_at_mut(nb);
+        for o in 0..no {
+            let h = &self.hist[o * nb..(o + 1) * nb];
+            let dst = &mut out.data[o * nb..(o + 1) * nb];
+            for i in 0..nb {
+                let hv = h[i];
+                let a = (hv * n0[i]).min(CLIP);
+                let b = (hv * n1[i]).min(CLIP);
+                let c = (hv * n2[i]).min(CLIP);
+                let d = (hv * n3[i]).min(CLIP);
+                dst[i] = 0.5 * (((a + b) + c) + d);
+                t0[i] += a;
+                t1[i] += b;
+                t2[i] += c;
+                t3[i] += d;
+            }
+        }
+        for o in 0..ORIENTATIONS {
+            let (ha, hb_) = (
+                &self.hist[o * nb..(o + 1) * nb],
+                &self.hist[(o + ORIENTATIONS) * nb..(o + ORIENTATIONS + 1) * nb],
+            );
+            let dst = &mut out.data[(no + o) * nb..(no + o + 1) * nb];
+            for i in 0..nb {
+                let hv = ha[i] + hb_[i];
+                let a = (hv * n0[i]).min(CLIP);
+                let b = (hv * n1[i]).min(CLIP);
+                let c = (hv * n2[i]).min(CLIP);
+                let d = (hv * n3[i]).min(CLIP);
+                dst[i] = 0.5 * (((a + b) + c) + d);
+            }
+        }
+        for (k, t) in [&*t0, &*t1, &*t2, &*t3].into_iter().enumerate() {
+            let dst = &mut out.data[(3 * ORIENTATIONS + k) * nb..(3 * ORIENTATIONS + k + 1) * nb];
+            for (o, &v) in dst.iter_mut().zip(t) {
+                *o = TEXTURE_WEIGHT * v;
             }
         }
         let mut next = HOG_CHANNELS;
@@ -617,6 +652,65 @@ mod tests {
             for i in 0..nb {
                 assert!(f.data[d * nb + i] <= TEXTURE_WEIGHT * 18.0 * CLIP + 1e-4);
             }
+        }
+    }
+
+    /// The channel formulas cell by cell, as Dollár's `fhog` loops (and as this module did
+    /// before the orientation-major layout), from the extractor's own histograms and
+    /// normalisers: the channels along the cells are the same bits.
+    #[test]
+    fn channels_along_the_cells_equal_the_cell_by_cell_formulas_bit_for_bit() {
+        for (side, cell) in [(40, 4), (37, 3), (24, 4)] {
+            let mut p = Patch::new(side, 3);
+            for (i, v) in p.data.iter_mut().enumerate() {
+                *v = ((i * 7919 + i / 11) % 256) as f32;
+            }
+            let g = side / cell;
+            let mut hog = Hog::new(cell, false);
+            let mut f = FeatureMap::new(GridSize { h: g, w: g }, hog.channels());
+            hog.extract(&p, cell, &mut f).unwrap();
+            let (nb, wb1, no) = (g * g, g + 1, 2 * ORIENTATIONS);
+            let mut nonzero = 0;
+            for cy in 0..g {
+                for cx in 0..g {
+                    let i = cy * g + cx;
+                    let n = [
+                        hog.norm[(cy + 1) * wb1 + cx + 1],
+                        hog.norm[cy * wb1 + cx + 1],
+                        hog.norm[(cy + 1) * wb1 + cx],
+                        hog.norm[cy * wb1 + cx],
+                    ];
+                    let h = |o: usize| hog.hist[o * nb + i];
+                    let mut tex = [0.0f32; 4];
+                    let mut want = [0.0f32; HOG_CHANNELS];
+                    for o in 0..no {
+                        let mut acc = 0.0;
+                        for (k, nk) in n.iter().enumerate() {
+                            let t = (h(o) * nk).min(CLIP);
+                            acc += t;
+                            tex[k] += t;
+                        }
+                        want[o] = 0.5 * acc;
+                    }
+                    for o in 0..ORIENTATIONS {
+                        let v = h(o) + h(o + ORIENTATIONS);
+                        want[no + o] = 0.5 * n.iter().map(|nk| (v * nk).min(CLIP)).sum::<f32>();
+                    }
+                    for (k, t) in tex.iter().enumerate() {
+                        want[3 * ORIENTATIONS + k] = TEXTURE_WEIGHT * t;
+                    }
+                    for (d, w) in want.iter().enumerate() {
+                        let got = f.data[d * nb + i];
+                        assert_eq!(
+                            got.to_bits(),
+                            w.to_bits(),
+                            "side {side} cell {cell} channel {d}"
+                        );
+                        nonzero += usize::from(got > 0.0);
+                    }
+                }
+            }
+            assert!(nonzero > nb * 5, "a textured patch: {nonzero}");
         }
     }
 
