@@ -241,151 +241,7 @@ impl Sampler {
         max_region: f32,
         out_side: usize,
     ) {
-        let ratio = min_region / out_side.max(1) as f32;
-        let factor = if ratio >= 2.0 {
-            ratio.floor() as usize
-        } else {
-            1
-        };
-        let f = factor as f32;
-        let half = max_region / 2.0 + 2.0 * f;
-        let x0 = ((center.x - half) / f).floor() * f;
-        let y0 = ((center.y - half) / f).floor() * f;
-        let w = (((center.x + half) - x0) / f).ceil().max(1.0) as usize;
-        let h = (((center.y + half) - y0) / f).ceil().max(1.0) as usize;
-        let planes = frame.format().planes();
-        self.factor = factor;
-        self.ox = x0;
-        self.oy = y0;
-        self.inter_w = w;
-        self.inter_h = h;
-        self.planes = planes;
-        self.inter.resize(w * h * planes, 0.0);
-
-        let bpp = frame.format().bytes_per_pixel();
-        let offs = frame.format().rgb_offsets();
-        let fw = frame.width() as isize;
-        let fh = frame.height() as isize;
-        let data = frame.data();
-        let stride = frame.stride();
-        let sx0 = x0 as isize;
-        let sy0 = y0 as isize;
-        let inv = 1.0 / (f * f);
-        // Region columns `0..wide`: those left of the frame replicate column 0, those right
-        // of it column `fw − 1`, the span `left..right` is read in place, sequentially.
-        // When the span is empty, `first_x` is the replicated column itself.
-        let wide = w * factor;
-        let left = (-sx0).clamp(0, wide as isize) as usize;
-        let right = (fw - sx0).clamp(left as isize, wide as isize) as usize;
-        let first_x = (sx0 + left as isize).clamp(0, fw - 1) as usize;
-        let nspan = (right - left).max(1);
-        let bytes = nspan * bpp;
-        // Byte offset in the span of each region column's pixel.
-        self.col_src.clear();
-        self.col_src.extend((0..wide).map(|x| {
-            let i = if x < left {
-                0
-            } else if x >= right {
-                nspan - 1
-            } else {
-                x - left
-            };
-            i * bpp
-        }));
-        // The `factor` rows of one output row are summed as exact integers, interleaved as
-        // in the frame (one widening add per byte), in u16 batches of at most
-        // `U16_ROWS` rows; integer sums below 2^24 are what the f32 sums were.
-        const U16_ROWS: usize = 256;
-        let batched = factor > U16_ROWS;
-        self.acc16.resize(bytes, 0);
-        self.acc32.resize(if batched { bytes } else { 0 }, 0);
-        self.col_sum.resize(w * planes, 0);
-        // An output row whose `factor` source rows all clamp to the same frame row (above or
-        // below the frame) equals the previous such row: copied instead of summed again.
-        let mut prev_clamped: Option<usize> = None;
-        let small_sums = (factor as u64 * factor as u64 * 255) < (1u64 << 31);
-        for r in 0..h {
-            let first = sy0 + (r * factor) as isize;
-            let last = first + factor as isize - 1;
-            let clamped = if last <= 0 {
-                Some(0)
-            } else if first >= fh - 1 {
-                Some((fh - 1) as usize)
-            } else {
-                None
-            };
-            if clamped.is_some() && clamped == prev_clamped {
-                for p in 0..planes {
-                    let start = (p * h + r - 1) * w;
-                    self.inter.copy_within(start..start + w, start + w);
-                }
-                continue;
-            }
-            prev_clamped = clamped;
-            self.acc32.iter_mut().for_each(|v| *v = 0);
-            for k in 0..factor {
-                if batched && k > 0 && k % U16_ROWS == 0 {
-                    flush(&mut self.acc16, &mut self.acc32);
-                }
-                let sy = (sy0 + (r * factor + k) as isize).clamp(0, fh - 1) as usize;
-                let start = sy * stride + first_x * bpp;
-                let src = &data[start..start + bytes];
-                if k == 0 {
-                    // The first row initialises the sums (no separate clearing pass).
-                    for (a, &b) in self.acc16.iter_mut().zip(src) {
-                        *a = u16::from(b);
-                    }
-                } else {
-                    for (a, &b) in self.acc16.iter_mut().zip(src) {
-                        *a += u16::from(b);
-                    }
-                }
-            }
-            if batched {
-                flush(&mut self.acc16, &mut self.acc32);
-                column_sums(
-                    &self.acc32,
-                    &self.col_src,
-                    bpp,
-                    offs,
-                    factor,
-                    &mut self.col_sum,
-                );
-            } else if factor == 1 {
-                // Single pixels: a plain per-plane gather (inv = 1).
-                for p in 0..planes {
-                    let out = &mut self.inter[(p * h + r) * w..(p * h + r + 1) * w];
-                    for (o, &c) in out.iter_mut().zip(&self.col_src) {
-                        *o = f32::from(self.acc16[c + offs[p]]);
-                    }
-                }
-                continue;
-            } else {
-                column_sums(
-                    &self.acc16,
-                    &self.col_src,
-                    bpp,
-                    offs,
-                    factor,
-                    &mut self.col_sum,
-                );
-            }
-            for p in 0..planes {
-                let out = &mut self.inter[(p * h + r) * w..(p * h + r + 1) * w];
-                let sums = &self.col_sum[p * w..(p + 1) * w];
-                if small_sums {
-                    // Sums below 2^31 convert through i32 alike, and that conversion
-                    // vectorises (u32 → f32 has no baseline x86-64 instruction).
-                    for (o, &s) in out.iter_mut().zip(sums) {
-                        *o = s as i32 as f32 * inv;
-                    }
-                } else {
-                    for (o, &s) in out.iter_mut().zip(sums) {
-                        *o = s as f32 * inv;
-                    }
-                }
-            }
-        }
+        prepare_into(self, frame, center, min_region, max_region, out_side);
     }
 
     /// Samples a square of side `region` frame pixels centred on `center` (which must lie in
@@ -402,60 +258,210 @@ impl Sampler {
     /// patch (prepare with the shorter side as `min_region`; aspect ratios up to
     /// [`MAX_SAMPLE_ASPECT`] are resampled exactly, longer footprints lose their far taps).
     pub fn sample_rect(&self, center: Point2, region_w: f32, region_h: f32, out: &mut Patch) {
-        let side = out.side;
-        out.planes = self.planes;
-        out.data.resize(side * side * self.planes, 0.0);
-        let f = self.factor as f32;
-        let (kx, ky) = (region_w / side as f32, region_h / side as f32);
-        let (w, h) = (self.inter_w, self.inter_h);
-        // Output pixel j's centre in frame edge coordinates: center + (j + 0.5 − side/2)·k;
-        // in intermediate pixel-centre coordinates: (X − origin)/f − 0.5. Footprint width k/f.
-        let map = |c: f32, o: f32, j: usize, k: f32| {
-            (c + (j as f32 + 0.5 - side as f32 / 2.0) * k - o) / f - 0.5
+        sample_rect_into(self, center, region_w, region_h, out);
+    }
+}
+
+/// [`Sampler::prepare`]'s work (compiled for the baseline and with AVX2 + FMA).
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
+fn prepare_into(
+    s: &mut Sampler,
+    frame: &Frame<'_>,
+    center: Point2,
+    min_region: f32,
+    max_region: f32,
+    out_side: usize,
+) {
+    let ratio = min_region / out_side.max(1) as f32;
+    let factor = if ratio >= 2.0 {
+        ratio.floor() as usize
+    } else {
+        1
+    };
+    let f = factor as f32;
+    let half = max_region / 2.0 + 2.0 * f;
+    let x0 = ((center.x - half) / f).floor() * f;
+    let y0 = ((center.y - half) / f).floor() * f;
+    let w = (((center.x + half) - x0) / f).ceil().max(1.0) as usize;
+    let h = (((center.y + half) - y0) / f).ceil().max(1.0) as usize;
+    let planes = frame.format().planes();
+    s.factor = factor;
+    s.ox = x0;
+    s.oy = y0;
+    s.inter_w = w;
+    s.inter_h = h;
+    s.planes = planes;
+    s.inter.resize(w * h * planes, 0.0);
+
+    let bpp = frame.format().bytes_per_pixel();
+    let offs = frame.format().rgb_offsets();
+    let fw = frame.width() as isize;
+    let fh = frame.height() as isize;
+    let data = frame.data();
+    let stride = frame.stride();
+    let sx0 = x0 as isize;
+    let sy0 = y0 as isize;
+    let inv = 1.0 / (f * f);
+    // Region columns `0..wide`: those left of the frame replicate column 0, those right
+    // of it column `fw − 1`, the span `left..right` is read in place, sequentially.
+    // When the span is empty, `first_x` is the replicated column its.
+    let wide = w * factor;
+    let left = (-sx0).clamp(0, wide as isize) as usize;
+    let right = (fw - sx0).clamp(left as isize, wide as isize) as usize;
+    let first_x = (sx0 + left as isize).clamp(0, fw - 1) as usize;
+    let nspan = (right - left).max(1);
+    let bytes = nspan * bpp;
+    // Byte offset in the span of each region column's pixel.
+    s.col_src.clear();
+    s.col_src.extend((0..wide).map(|x| {
+        let i = if x < left {
+            0
+        } else if x >= right {
+            nspan - 1
+        } else {
+            x - left
         };
-        out.cols.clear();
-        for j in 0..side {
-            out.cols
-                .push(Taps::new(map(center.x, self.ox, j, kx), kx / f, w));
+        i * bpp
+    }));
+    // The `factor` rows of one output row are summed as exact integers, interleaved as
+    // in the frame (one widening add per byte), in u16 batches of at most
+    // `U16_ROWS` rows; integer sums below 2^24 are what the f32 sums were.
+    const U16_ROWS: usize = 256;
+    let batched = factor > U16_ROWS;
+    s.acc16.resize(bytes, 0);
+    s.acc32.resize(if batched { bytes } else { 0 }, 0);
+    s.col_sum.resize(w * planes, 0);
+    // An output row whose `factor` source rows all clamp to the same frame row (above or
+    // below the frame) equals the previous such row: copied instead of summed again.
+    let mut prev_clamped: Option<usize> = None;
+    let small_sums = (factor as u64 * factor as u64 * 255) < (1u64 << 31);
+    for r in 0..h {
+        let first = sy0 + (r * factor) as isize;
+        let last = first + factor as isize - 1;
+        let clamped = if last <= 0 {
+            Some(0)
+        } else if first >= fh - 1 {
+            Some((fh - 1) as usize)
+        } else {
+            None
+        };
+        if clamped.is_some() && clamped == prev_clamped {
+            for p in 0..planes {
+                let start = (p * h + r - 1) * w;
+                s.inter.copy_within(start..start + w, start + w);
+            }
+            continue;
         }
-        out.rows.clear();
-        for r in 0..side {
-            out.rows
-                .push(Taps::new(map(center.y, self.oy, r, ky), ky / f, h));
-        }
-        let cmin = out.cols.iter().map(|t| t.start).min().unwrap_or(0);
-        let cmax = out
-            .cols
-            .iter()
-            .map(|t| t.start + t.len)
-            .max()
-            .unwrap_or(0)
-            .min(w);
-        out.tmp.resize(w, 0.0);
-        for p in 0..self.planes {
-            let src = &self.inter[p * w * h..(p + 1) * w * h];
-            for (r, rt) in out.rows.iter().enumerate() {
-                // Vertical pass into one row, then the horizontal pass.
-                let tmp = &mut out.tmp[cmin..cmax];
-                tmp.iter_mut().for_each(|v| *v = 0.0);
-                for t in 0..rt.len {
-                    let wt = rt.w[t];
-                    let row = &src[(rt.start + t) * w + cmin..(rt.start + t) * w + cmax];
-                    for (a, b) in tmp.iter_mut().zip(row) {
-                        *a += wt * b;
-                    }
+        prev_clamped = clamped;
+        s.acc32.iter_mut().for_each(|v| *v = 0);
+        for k in 0..factor {
+            if batched && k > 0 && k % U16_ROWS == 0 {
+                flush(&mut s.acc16, &mut s.acc32);
+            }
+            let sy = (sy0 + (r * factor + k) as isize).clamp(0, fh - 1) as usize;
+            let start = sy * stride + first_x * bpp;
+            let src = &data[start..start + bytes];
+            if k == 0 {
+                // The first row initialises the sums (no separate clearing pass).
+                for (a, &b) in s.acc16.iter_mut().zip(src) {
+                    *a = u16::from(b);
                 }
-                let o = &mut out.data[(p * side + r) * side..(p * side + r + 1) * side];
-                for (o, ct) in o.iter_mut().zip(out.cols.iter()) {
-                    let src = &out.tmp[ct.start..ct.start + ct.len];
-                    *o = src.iter().zip(&ct.w).map(|(a, b)| a * b).sum();
+            } else {
+                for (a, &b) in s.acc16.iter_mut().zip(src) {
+                    *a += u16::from(b);
+                }
+            }
+        }
+        if batched {
+            flush(&mut s.acc16, &mut s.acc32);
+            column_sums(&s.acc32, &s.col_src, bpp, offs, factor, &mut s.col_sum);
+        } else if factor == 1 {
+            // Single pixels: a plain per-plane gather (inv = 1).
+            for p in 0..planes {
+                let out = &mut s.inter[(p * h + r) * w..(p * h + r + 1) * w];
+                for (o, &c) in out.iter_mut().zip(&s.col_src) {
+                    *o = f32::from(s.acc16[c + offs[p]]);
+                }
+            }
+            continue;
+        } else {
+            column_sums(&s.acc16, &s.col_src, bpp, offs, factor, &mut s.col_sum);
+        }
+        for p in 0..planes {
+            let out = &mut s.inter[(p * h + r) * w..(p * h + r + 1) * w];
+            let sums = &s.col_sum[p * w..(p + 1) * w];
+            if small_sums {
+                // Sums below 2^31 convert through i32 alike, and that conversion
+                // vectorises (u32 → f32 has no baseline x86-64 instruction).
+                for (o, &s) in out.iter_mut().zip(sums) {
+                    *o = s as i32 as f32 * inv;
+                }
+            } else {
+                for (o, &s) in out.iter_mut().zip(sums) {
+                    *o = s as f32 * inv;
                 }
             }
         }
     }
 }
 
+/// [`Sampler::sample_rect`]'s work (compiled for the baseline and with AVX2 + FMA).
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
+fn sample_rect_into(s: &Sampler, center: Point2, region_w: f32, region_h: f32, out: &mut Patch) {
+    let side = out.side;
+    out.planes = s.planes;
+    out.data.resize(side * side * s.planes, 0.0);
+    let f = s.factor as f32;
+    let (kx, ky) = (region_w / side as f32, region_h / side as f32);
+    let (w, h) = (s.inter_w, s.inter_h);
+    // Output pixel j's centre in frame edge coordinates: center + (j + 0.5 − side/2)·k;
+    // in intermediate pixel-centre coordinates: (X − origin)/f − 0.5. Footprint width k/f.
+    let map = |c: f32, o: f32, j: usize, k: f32| {
+        (c + (j as f32 + 0.5 - side as f32 / 2.0) * k - o) / f - 0.5
+    };
+    out.cols.clear();
+    for j in 0..side {
+        out.cols
+            .push(Taps::new(map(center.x, s.ox, j, kx), kx / f, w));
+    }
+    out.rows.clear();
+    for r in 0..side {
+        out.rows
+            .push(Taps::new(map(center.y, s.oy, r, ky), ky / f, h));
+    }
+    let cmin = out.cols.iter().map(|t| t.start).min().unwrap_or(0);
+    let cmax = out
+        .cols
+        .iter()
+        .map(|t| t.start + t.len)
+        .max()
+        .unwrap_or(0)
+        .min(w);
+    out.tmp.resize(w, 0.0);
+    for p in 0..s.planes {
+        let src = &s.inter[p * w * h..(p + 1) * w * h];
+        for (r, rt) in out.rows.iter().enumerate() {
+            // Vertical pass into one row, then the horizontal pass.
+            let tmp = &mut out.tmp[cmin..cmax];
+            tmp.iter_mut().for_each(|v| *v = 0.0);
+            for t in 0..rt.len {
+                let wt = rt.w[t];
+                let row = &src[(rt.start + t) * w + cmin..(rt.start + t) * w + cmax];
+                for (a, b) in tmp.iter_mut().zip(row) {
+                    *a += wt * b;
+                }
+            }
+            let o = &mut out.data[(p * side + r) * side..(p * side + r + 1) * side];
+            for (o, ct) in o.iter_mut().zip(out.cols.iter()) {
+                let src = &out.tmp[ct.start..ct.start + ct.len];
+                *o = src.iter().zip(&ct.w).map(|(a, b)| a * b).sum();
+            }
+        }
+    }
+}
+
 /// Adds a u16 row-sum batch into the u32 sums and clears it.
+#[inline(always)] // into each clone of `prepare_into`
 fn flush(acc16: &mut [u16], acc32: &mut [u32]) {
     for (a, b) in acc32.iter_mut().zip(acc16.iter_mut()) {
         *a += u32::from(*b);
@@ -467,6 +473,7 @@ fn flush(acc16: &mut [u16], acc32: &mut [u32]) {
 /// output column `j` of plane `p` sums the row sums of region columns
 /// `j·factor..(j+1)·factor` (byte offsets `col_src`, plus the plane's offset `offs[p]`).
 /// Exact integer sums, so the order of the additions does not matter.
+#[inline(always)]
 fn column_sums<T: Copy + Into<u32>>(
     acc: &[T],
     col_src: &[usize],
@@ -495,6 +502,7 @@ fn column_sums<T: Copy + Into<u32>>(
 
 /// [`column_sums`] for `B` interleaved bytes per pixel: each output column's pixels are read
 /// once for all planes, contiguously when they lie inside the frame.
+#[inline(always)]
 fn column_sums_px<T: Copy + Into<u32>, const B: usize>(
     acc: &[T],
     col_src: &[usize],

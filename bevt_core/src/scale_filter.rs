@@ -92,6 +92,7 @@ impl std::fmt::Debug for ScaleFilter {
 const LANES: usize = 8;
 
 /// `Σ a_i·b_i` with [`LANES`] independent partial sums.
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
 fn dot(a: &[f32], b: &[f32]) -> f32 {
     let mut acc = [0.0f32; LANES];
     let (ca, cb) = (a.chunks_exact(LANES), b.chunks_exact(LANES));

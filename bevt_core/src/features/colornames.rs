@@ -83,6 +83,7 @@ pub fn cell_colornames(patch: &Patch, cell: usize, rows: usize, cols: usize, out
 
 /// [`cell_colornames`] with a caller-owned scratch buffer (no allocation once it has grown
 /// to a patch row).
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
 pub fn cell_colornames_with(
     patch: &Patch,
     cell: usize,

@@ -7,6 +7,7 @@ const LUMA: [f32; 3] = [0.299, 0.587, 0.114];
 
 /// Writes the mean luminance of each `cell × cell` block of `patch`, `/255 − 0.5`, into
 /// `out` (row-major `rows × cols`).
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
 pub fn cell_gray(patch: &Patch, cell: usize, rows: usize, cols: usize, out: &mut [f32]) {
     let out = &mut out[..rows * cols];
     out.iter_mut().for_each(|v| *v = 0.0);

@@ -152,6 +152,7 @@ impl Hog {
     }
 
     /// Gradient magnitude and orientation bin (0..18) of every pixel.
+    #[inline(always)] // into each of `hog_channels`' clones
     fn gradients(&mut self, patch: &Patch) {
         let s = patch.side;
         let n = s * s;
@@ -309,6 +310,7 @@ impl Hog {
     /// per-cell arithmetic below runs along contiguous cells) with bilinear spatial voting.
     /// Each bin receives its votes in pixel order whatever the layout, so the sums are the
     /// same bits in either.
+    #[inline(always)] // into each of `hog_channels`' clones
     fn histograms(&mut self, side: usize, cell: usize, hb: usize, wb: usize) {
         let nb = hb * wb;
         let no = 2 * ORIENTATIONS;
@@ -357,6 +359,7 @@ impl Hog {
 
     /// Block normalisers `norm[(hb+1) × (wb+1)]` from the insensitive histograms, then
     /// each cell's four (`quad[k·nb + cell]`, `k` as in the channel formulas).
+    #[inline(always)] // into each of `hog_channels`' clones
     fn normalisers(&mut self, cell: usize, hb: usize, wb: usize) {
         let nb = hb * wb;
         self.energy.clear();
@@ -401,6 +404,66 @@ impl Hog {
     }
 }
 
+/// The 31 HOG channels of `patch` into the start of `data` (`hb × wb` cells of side
+/// `cell`; the caller has checked the sizes). Compiled twice: for the baseline and
+/// with AVX2 + FMA, chosen at run time (the same code, so the same bits).
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))]
+fn hog_channels(hog: &mut Hog, patch: &Patch, cell: usize, hb: usize, wb: usize, data: &mut [f32]) {
+    let nb = hb * wb;
+    hog.gradients(patch);
+    hog.histograms(patch.side, cell, hb, wb);
+    hog.normalisers(cell, hb, wb);
+    let no = 2 * ORIENTATIONS;
+    // Channel by channel along the cells (vectorises): value `0.5·Σ_k min(h·n_k, 0.2)`,
+    // the sensitive bins' terms also summed per `k` over the bins into the texture
+    // channels; the same additions in the same order as cell by cell.
+    let (n0, rest) = hog.quad.split_at(nb);
+    let (n1, rest) = rest.split_at(nb);
+    let (n2, n3) = rest.split_at(nb);
+    hog.tex.clear();
+    hog.tex.resize(4 * nb, 0.0);
+    let (t0, rest) = hog.tex.split_at_mut(nb);
+    let (t1, rest) = rest.split_at_mut(nb);
+    let (t2, t3) = rest.split_at_mut(nb);
+    for o in 0..no {
+        let h = &hog.hist[o * nb..(o + 1) * nb];
+        let dst = &mut data[o * nb..(o + 1) * nb];
+        for i in 0..nb {
+            let hv = h[i];
+            let a = (hv * n0[i]).min(CLIP);
+            let b = (hv * n1[i]).min(CLIP);
+            let c = (hv * n2[i]).min(CLIP);
+            let d = (hv * n3[i]).min(CLIP);
+            dst[i] = 0.5 * (((a + b) + c) + d);
+            t0[i] += a;
+            t1[i] += b;
+            t2[i] += c;
+            t3[i] += d;
+        }
+    }
+    for o in 0..ORIENTATIONS {
+        let (ha, hb_) = (
+            &hog.hist[o * nb..(o + 1) * nb],
+            &hog.hist[(o + ORIENTATIONS) * nb..(o + ORIENTATIONS + 1) * nb],
+        );
+        let dst = &mut data[(no + o) * nb..(no + o + 1) * nb];
+        for i in 0..nb {
+            let hv = ha[i] + hb_[i];
+            let a = (hv * n0[i]).min(CLIP);
+            let b = (hv * n1[i]).min(CLIP);
+            let c = (hv * n2[i]).min(CLIP);
+            let d = (hv * n3[i]).min(CLIP);
+            dst[i] = 0.5 * (((a + b) + c) + d);
+        }
+    }
+    for (k, t) in [&*t0, &*t1, &*t2, &*t3].into_iter().enumerate() {
+        let dst = &mut data[(3 * ORIENTATIONS + k) * nb..(3 * ORIENTATIONS + k + 1) * nb];
+        for (o, &v) in dst.iter_mut().zip(t) {
+            *o = TEXTURE_WEIGHT * v;
+        }
+    }
+}
+
 impl FeatureExtractor for Hog {
     fn layers(&self) -> &[LayerInfo] {
         &self.layers
@@ -436,58 +499,7 @@ impl FeatureExtractor for Hog {
                 self.channels()
             )));
         }
-        self.gradients(patch);
-        self.histograms(patch.side, cell, hb, wb);
-        self.normalisers(cell, hb, wb);
-        let no = 2 * ORIENTATIONS;
-        // Channel by channel along the cells (vectorises): value `0.5·Σ_k min(h·n_k, 0.2)`,
-        // the sensitive bins' terms also summed per `k` over the bins into the texture
-        // channels; the same additions in the same order as cell by cell.
-        let (n0, rest) = self.quad.split_at(nb);
-        let (n1, rest) = rest.split_at(nb);
-        let (n2, n3) = rest.split_at(nb);
-        self.tex.clear();
-        self.tex.resize(4 * nb, 0.0);
-        let (t0, rest) = self.tex.split_at_mut(nb);
-        let (t1, rest) = rest.split_at_mut(nb);
-        let (t2, t3) = rest.split_at_mut(nb);
-        for o in 0..no {
-            let h = &self.hist[o * nb..(o + 1) * nb];
-            let dst = &mut out.data[o * nb..(o + 1) * nb];
-            for i in 0..nb {
-                let hv = h[i];
-                let a = (hv * n0[i]).min(CLIP);
-                let b = (hv * n1[i]).min(CLIP);
-                let c = (hv * n2[i]).min(CLIP);
-                let d = (hv * n3[i]).min(CLIP);
-                dst[i] = 0.5 * (((a + b) + c) + d);
-                t0[i] += a;
-                t1[i] += b;
-                t2[i] += c;
-                t3[i] += d;
-            }
-        }
-        for o in 0..ORIENTATIONS {
-            let (ha, hb_) = (
-                &self.hist[o * nb..(o + 1) * nb],
-                &self.hist[(o + ORIENTATIONS) * nb..(o + ORIENTATIONS + 1) * nb],
-            );
-            let dst = &mut out.data[(no + o) * nb..(no + o + 1) * nb];
-            for i in 0..nb {
-                let hv = ha[i] + hb_[i];
-                let a = (hv * n0[i]).min(CLIP);
-                let b = (hv * n1[i]).min(CLIP);
-                let c = (hv * n2[i]).min(CLIP);
-                let d = (hv * n3[i]).min(CLIP);
-                dst[i] = 0.5 * (((a + b) + c) + d);
-            }
-        }
-        for (k, t) in [&*t0, &*t1, &*t2, &*t3].into_iter().enumerate() {
-            let dst = &mut out.data[(3 * ORIENTATIONS + k) * nb..(3 * ORIENTATIONS + k + 1) * nb];
-            for (o, &v) in dst.iter_mut().zip(t) {
-                *o = TEXTURE_WEIGHT * v;
-            }
-        }
+        hog_channels(self, patch, cell, hb, wb, &mut out.data);
         let mut next = HOG_CHANNELS;
         if self.grayscale {
             gray::cell_gray(

@@ -329,17 +329,7 @@ impl AdmmSolver {
             let c = (c64(yf[k]) + self.s_lx[k] / mu64 - self.s_hx[k]) / b;
             self.coef[k] = Complex32::new(c.re as f32, c.im as f32);
         }
-        let inv_mu = 1.0 / mu;
-        for (((g, x), l), h) in g_f
-            .chunks_exact_mut(bins)
-            .zip(xf.chunks_exact(bins))
-            .zip(self.l_f.chunks_exact(bins))
-            .zip(self.h_f.chunks_exact(bins))
-        {
-            for k in 0..bins {
-                g[k] = x[k] * self.coef[k] - l[k] * inv_mu + h[k];
-            }
-        }
+        g_update(g_f, xf, &self.l_f, &self.h_f, &self.coef, 1.0 / mu);
     }
 
     /// Spatial penalty solve, crop to the support, back to the frequency domain.
@@ -412,9 +402,34 @@ impl AdmmSolver {
 /// Bins per block of [`channel_sums`]: the block's sums stay in a few KiB of stack.
 const SUM_BLOCK: usize = 64;
 
+/// `ĝ = x̂ · coef − l̂ · inv_mu + ĥ`, channel by channel (`coef` per bin): the last line of
+/// [`AdmmSolver::g_step`]'s closed form.
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
+fn g_update(
+    g_f: &mut [Complex32],
+    xf: &[Complex32],
+    l_f: &[Complex32],
+    h_f: &[Complex32],
+    coef: &[Complex32],
+    inv_mu: f32,
+) {
+    let bins = coef.len();
+    for (((g, x), l), h) in g_f
+        .chunks_exact_mut(bins)
+        .zip(xf.chunks_exact(bins))
+        .zip(l_f.chunks_exact(bins))
+        .zip(h_f.chunks_exact(bins))
+    {
+        for k in 0..bins {
+            g[k] = x[k] * coef[k] - l[k] * inv_mu + h[k];
+        }
+    }
+}
+
 /// `S_lx = Σ_d conj(x̂_d) l̂_d` and `S_hx = Σ_d conj(x̂_d) ĥ_d` per bin, in `f64`, summed
 /// over the channels in order (`d = 0, 1, …`) exactly as `Complex64` arithmetic does, but a
 /// block of bins at a time in split real/imaginary accumulators so the loop vectorises.
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
 fn channel_sums(
     xf: &[Complex32],
     l_f: &[Complex32],

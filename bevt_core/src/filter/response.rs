@@ -14,6 +14,7 @@ pub struct LayerSlot {
 
 /// `out[k] = Σ_layers w_l · Σ_{d ∈ l} conj(ĝ_d[k]) · x̂_d[k]`, all spectra `bins` long and
 /// channel-major.
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
 pub fn fused_response(
     g_f: &[Complex32],
     x_f: &[Complex32],

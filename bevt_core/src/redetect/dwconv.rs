@@ -148,6 +148,7 @@ pub struct Scratch {
 /// `weights` (`channels` kernels of `k_h × k_w`) plus `bias` (one per channel) into `output`
 /// (`channels` planes of `out_h × out_w`), zero padding. Returns `false` (and leaves
 /// `output` alone) when a slice has the wrong length.
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
 pub fn depthwise(
     g: &Geometry,
     input: &[f32],
@@ -270,6 +271,7 @@ pub fn depthwise(
 
 /// `wide[i] += w₀·s₀[i] + w₁·s₁[i] + w₂·s₂[i]` (one kernel row of three taps; the zipped
 /// slice iterators let the compiler drop the bounds checks and vectorise).
+#[inline(always)] // into each of `depthwise`' clones
 fn row3(wide: &mut [f32], s: [&[f32]; 3], w: [f32; 3]) {
     for (((o, &a), &b), &c) in wide.iter_mut().zip(s[0]).zip(s[1]).zip(s[2]) {
         *o += w[0] * a + w[1] * b + w[2] * c;
@@ -277,6 +279,7 @@ fn row3(wide: &mut [f32], s: [&[f32]; 3], w: [f32; 3]) {
 }
 
 /// [`row3`] for a kernel row of five taps.
+#[inline(always)]
 fn row5(wide: &mut [f32], s: [&[f32]; 5], w: [f32; 5]) {
     let taps = wide
         .iter_mut()

@@ -406,6 +406,7 @@ fn total_key(x: f32) -> i32 {
 /// Computed a row at a time (grey levels of a frame row once, template dot products of all
 /// positions of a map row together) so the loops vectorise; every value is summed in the
 /// order of the per-position definition, so the result is that of the direct computation.
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
 pub fn propose(
     frame: &Frame<'_>,
     appearance: &Appearance,
