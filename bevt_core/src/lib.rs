@@ -54,6 +54,10 @@ pub mod scale_filter;
 pub mod track_state;
 pub mod tracker;
 
+#[cfg(test)]
+#[cfg(target_arch = "x86_64")]
+mod dispatch_tests;
+
 pub use config::{TrackerConfig, TrackerSpec};
 pub use error::{ConfigError, TrackError};
 pub use geometry::{BBox, GridSize, Point2, Size2};
