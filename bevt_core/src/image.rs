@@ -265,7 +265,7 @@ impl Sampler {
 /// [`Sampler::prepare`]'s work (compiled for the baseline and with AVX2 + FMA).
 #[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
 fn prepare_into(
-    s: &mut Sampler,
+    sampler: &mut Sampler,
     frame: &Frame<'_>,
     center: Point2,
     min_region: f32,
@@ -285,13 +285,13 @@ fn prepare_into(
     let w = (((center.x + half) - x0) / f).ceil().max(1.0) as usize;
     let h = (((center.y + half) - y0) / f).ceil().max(1.0) as usize;
     let planes = frame.format().planes();
-    s.factor = factor;
-    s.ox = x0;
-    s.oy = y0;
-    s.inter_w = w;
-    s.inter_h = h;
-    s.planes = planes;
-    s.inter.resize(w * h * planes, 0.0);
+    sampler.factor = factor;
+    sampler.ox = x0;
+    sampler.oy = y0;
+    sampler.inter_w = w;
+    sampler.inter_h = h;
+    sampler.planes = planes;
+    sampler.inter.resize(w * h * planes, 0.0);
 
     let bpp = frame.format().bytes_per_pixel();
     let offs = frame.format().rgb_offsets();
@@ -312,8 +312,8 @@ fn prepare_into(
     let nspan = (right - left).max(1);
     let bytes = nspan * bpp;
     // Byte offset in the span of each region column's pixel.
-    s.col_src.clear();
-    s.col_src.extend((0..wide).map(|x| {
+    sampler.col_src.clear();
+    sampler.col_src.extend((0..wide).map(|x| {
         let i = if x < left {
             0
         } else if x >= right {
@@ -328,9 +328,9 @@ fn prepare_into(
     // `U16_ROWS` rows; integer sums below 2^24 are what the f32 sums were.
     const U16_ROWS: usize = 256;
     let batched = factor > U16_ROWS;
-    s.acc16.resize(bytes, 0);
-    s.acc32.resize(if batched { bytes } else { 0 }, 0);
-    s.col_sum.resize(w * planes, 0);
+    sampler.acc16.resize(bytes, 0);
+    sampler.acc32.resize(if batched { bytes } else { 0 }, 0);
+    sampler.col_sum.resize(w * planes, 0);
     // An output row whose `factor` source rows all clamp to the same frame row (above or
     // below the frame) equals the previous such row: copied instead of summed again.
     let mut prev_clamped: Option<usize> = None;
@@ -348,48 +348,62 @@ fn prepare_into(
         if clamped.is_some() && clamped == prev_clamped {
             for p in 0..planes {
                 let start = (p * h + r - 1) * w;
-                s.inter.copy_within(start..start + w, start + w);
+                sampler.inter.copy_within(start..start + w, start + w);
             }
             continue;
         }
         prev_clamped = clamped;
-        s.acc32.iter_mut().for_each(|v| *v = 0);
+        sampler.acc32.iter_mut().for_each(|v| *v = 0);
         for k in 0..factor {
             if batched && k > 0 && k % U16_ROWS == 0 {
-                flush(&mut s.acc16, &mut s.acc32);
+                flush(&mut sampler.acc16, &mut sampler.acc32);
             }
             let sy = (sy0 + (r * factor + k) as isize).clamp(0, fh - 1) as usize;
             let start = sy * stride + first_x * bpp;
             let src = &data[start..start + bytes];
             if k == 0 {
                 // The first row initialises the sums (no separate clearing pass).
-                for (a, &b) in s.acc16.iter_mut().zip(src) {
+                for (a, &b) in sampler.acc16.iter_mut().zip(src) {
                     *a = u16::from(b);
                 }
             } else {
-                for (a, &b) in s.acc16.iter_mut().zip(src) {
+                for (a, &b) in sampler.acc16.iter_mut().zip(src) {
                     *a += u16::from(b);
                 }
             }
         }
         if batched {
-            flush(&mut s.acc16, &mut s.acc32);
-            column_sums(&s.acc32, &s.col_src, bpp, offs, factor, &mut s.col_sum);
+            flush(&mut sampler.acc16, &mut sampler.acc32);
+            column_sums(
+                &sampler.acc32,
+                &sampler.col_src,
+                bpp,
+                offs,
+                factor,
+                &mut sampler.col_sum,
+            );
         } else if factor == 1 {
             // Single pixels: a plain per-plane gather (inv = 1).
             for p in 0..planes {
-                let out = &mut s.inter[(p * h + r) * w..(p * h + r + 1) * w];
-                for (o, &c) in out.iter_mut().zip(&s.col_src) {
-                    *o = f32::from(s.acc16[c + offs[p]]);
+                let out = &mut sampler.inter[(p * h + r) * w..(p * h + r + 1) * w];
+                for (o, &c) in out.iter_mut().zip(&sampler.col_src) {
+                    *o = f32::from(sampler.acc16[c + offs[p]]);
                 }
             }
             continue;
         } else {
-            column_sums(&s.acc16, &s.col_src, bpp, offs, factor, &mut s.col_sum);
+            column_sums(
+                &sampler.acc16,
+                &sampler.col_src,
+                bpp,
+                offs,
+                factor,
+                &mut sampler.col_sum,
+            );
         }
         for p in 0..planes {
-            let out = &mut s.inter[(p * h + r) * w..(p * h + r + 1) * w];
-            let sums = &s.col_sum[p * w..(p + 1) * w];
+            let out = &mut sampler.inter[(p * h + r) * w..(p * h + r + 1) * w];
+            let sums = &sampler.col_sum[p * w..(p + 1) * w];
             if small_sums {
                 // Sums below 2^31 convert through i32 alike, and that conversion
                 // vectorises (u32 → f32 has no baseline x86-64 instruction).
@@ -407,13 +421,19 @@ fn prepare_into(
 
 /// [`Sampler::sample_rect`]'s work (compiled for the baseline and with AVX2 + FMA).
 #[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
-fn sample_rect_into(s: &Sampler, center: Point2, region_w: f32, region_h: f32, out: &mut Patch) {
+fn sample_rect_into(
+    sampler: &Sampler,
+    center: Point2,
+    region_w: f32,
+    region_h: f32,
+    out: &mut Patch,
+) {
     let side = out.side;
-    out.planes = s.planes;
-    out.data.resize(side * side * s.planes, 0.0);
-    let f = s.factor as f32;
+    out.planes = sampler.planes;
+    out.data.resize(side * side * sampler.planes, 0.0);
+    let f = sampler.factor as f32;
     let (kx, ky) = (region_w / side as f32, region_h / side as f32);
-    let (w, h) = (s.inter_w, s.inter_h);
+    let (w, h) = (sampler.inter_w, sampler.inter_h);
     // Output pixel j's centre in frame edge coordinates: center + (j + 0.5 − side/2)·k;
     // in intermediate pixel-centre coordinates: (X − origin)/f − 0.5. Footprint width k/f.
     let map = |c: f32, o: f32, j: usize, k: f32| {
@@ -422,12 +442,12 @@ fn sample_rect_into(s: &Sampler, center: Point2, region_w: f32, region_h: f32, o
     out.cols.clear();
     for j in 0..side {
         out.cols
-            .push(Taps::new(map(center.x, s.ox, j, kx), kx / f, w));
+            .push(Taps::new(map(center.x, sampler.ox, j, kx), kx / f, w));
     }
     out.rows.clear();
     for r in 0..side {
         out.rows
-            .push(Taps::new(map(center.y, s.oy, r, ky), ky / f, h));
+            .push(Taps::new(map(center.y, sampler.oy, r, ky), ky / f, h));
     }
     let cmin = out.cols.iter().map(|t| t.start).min().unwrap_or(0);
     let cmax = out
@@ -438,8 +458,8 @@ fn sample_rect_into(s: &Sampler, center: Point2, region_w: f32, region_h: f32, o
         .unwrap_or(0)
         .min(w);
     out.tmp.resize(w, 0.0);
-    for p in 0..s.planes {
-        let src = &s.inter[p * w * h..(p + 1) * w * h];
+    for p in 0..sampler.planes {
+        let src = &sampler.inter[p * w * h..(p + 1) * w * h];
         for (r, rt) in out.rows.iter().enumerate() {
             // Vertical pass into one row, then the horizontal pass.
             let tmp = &mut out.tmp[cmin..cmax];
