@@ -33,10 +33,10 @@
 # skipped: a missing tool, dataset or sequence is an error (exit 1), as is any mismatch.
 #
 # Cost (docs/testing.md#ci): the test build and the programs are one feature resolution
-# (`-p bevt_core -p bevt_node` in both cargo commands), so every dependency, tract included,
-# is compiled once for aarch64; a cargo command with `-p bevt_core` alone resolves shared
-# dependencies' features differently from one with `-p bevt_node` and compiled tract's tree
-# twice. Dev profile (the profile the tests use, with its per-package opt-levels), so under
+# (`-p bevt_core -p bevt_node` in both cargo commands), so every dependency is compiled once
+# for aarch64; a cargo command with `-p bevt_core` alone resolves shared dependencies'
+# features differently from one with `-p bevt_node` and compiled the network engine's tree
+# (tract, then) twice. Dev profile (the profile the tests use, with its per-package opt-levels), so under
 # CI the native `bevt` is the one `cargo test --workspace` already built; no incremental
 # state for a one-off build.
 set -euo pipefail
@@ -154,13 +154,16 @@ done
 
 # Left out under emulation, by name (listed in the output): the tracker tests that run the
 # NanoTrack networks frame after frame (and the head test that plans and runs it three
-# times). The dev profile builds tract outside its kernels at opt-level 0 (Cargo.toml), which
-# qemu then emulates instruction by instruction: the first seven took 53-623 s each, about 20
-# minutes together (2026-11-25), the three added since (box_refine, the head split) each ran
-# over 5 minutes (2026-11-26), against about 40 s for the other 137 (docs/testing.md#ci); the
-# drift anchor's test (2026-11-27) runs the verifier on 65 frames, as the drift tests do.
-# They run natively in `cargo test --workspace`; on aarch64, tract's arm64 kernels are exercised by the eval below, whose default configuration runs
-# the NanoTrack drift check every 15 confident frames and whose boxes and states must match.
+# times). When tract ran the networks (until 2026-11-27) the dev profile built it at
+# opt-level 0 and qemu emulated that instruction by instruction: the first seven took 53-623 s
+# each, about 20 minutes together (2026-11-25), the three added since (box_refine, the head
+# split) each over 5 minutes (2026-11-26), against about 40 s for the other 137
+# (docs/testing.md#ci); the drift anchor's test runs the verifier on 65 frames, as the drift
+# tests do. bevt_core::nn now runs them at bevt_core's opt-level 3; their time under qemu has
+# not been measured again, so they stay out. They run natively in `cargo test --workspace`;
+# on aarch64 the network code is exercised by the eval below, whose default configuration
+# runs the NanoTrack drift check every 15 confident frames and whose boxes and states must
+# match.
 skipped=(
   tracker::tests::a_confirmed_drift_makes_the_track_lost_with_its_reason
   redetect::nano::tests::head_branches_run_apart_equal_the_whole_head_bit_for_bit
@@ -179,7 +182,7 @@ skip_args=()
 for t in "${skipped[@]}"; do
   # A renamed or deleted test must leave this list too.
   grep -qxF "$t: test" <<<"$listed" || fail "no unit test $t in bevt_core (update the list)"
-  echo "test-aarch64: not run under qemu (NanoTrack per frame, tract at opt-level 0): $t" >&2
+  echo "test-aarch64: not run under qemu (NanoTrack frame after frame; run natively): $t" >&2
   skip_args+=(--skip "$t")
 done
 

@@ -1,7 +1,7 @@
 //! Per-pass time of the NanoTrack v2 re-detection verifier: backbone on a 255×255 search
-//! crop, backbone on a 127×127 template crop, head. Under tract (every build); with the
-//! `cnn` feature and `ORT_DYLIB_PATH` set, also the same models under ONNX Runtime (one
-//! thread, all graph optimisations), in the same run, for the tract/ort ratio:
+//! crop, backbone on a 127×127 template crop, head. On bevt_core::nn (every build); with
+//! the `cnn` feature and `ORT_DYLIB_PATH` set, also the same models under ONNX Runtime (one
+//! thread, all graph optimisations), in the same run, for the nn/ort ratio:
 //!
 //! `cargo bench -p bevt_core --bench verifier`
 //! `ORT_DYLIB_PATH=$(bash scripts/onnxruntime.sh) cargo bench -p bevt_core --features cnn --bench verifier`
@@ -25,13 +25,13 @@ fn passes(c: &mut Criterion) {
     let zf = v.backbone(&z, TEMPLATE_SIDE).unwrap();
     let xf = v.backbone(&x, SEARCH_SIDE).unwrap();
     assert_eq!(xf.len(), CHANNELS * 256);
-    c.bench_function("tract_backbone_255", |b| {
+    c.bench_function("nn_backbone_255", |b| {
         b.iter(|| black_box(v.backbone(black_box(&x), SEARCH_SIDE).unwrap()))
     });
-    c.bench_function("tract_backbone_127", |b| {
+    c.bench_function("nn_backbone_127", |b| {
         b.iter(|| black_box(v.backbone(black_box(&z), TEMPLATE_SIDE).unwrap()))
     });
-    c.bench_function("tract_head", |b| {
+    c.bench_function("nn_head", |b| {
         b.iter(|| black_box(v.head(black_box(&zf), black_box(&xf)).unwrap()))
     });
     #[cfg(feature = "cnn")]
@@ -72,14 +72,14 @@ fn ort_passes(c: &mut Criterion, x: &[f32], z: &[f32], zf: &[f32], xf: &[f32]) {
             .1
             .to_vec()
     };
-    // Same numbers as tract (the verifier's outputs do not depend on the backend).
+    // Same numbers as bevt_core::nn (the verifier's outputs do not depend on the backend).
     let ort_xf = backbone(x, SEARCH_SIDE);
     let diff = ort_xf
         .iter()
         .zip(xf)
         .map(|(a, b)| (a - b).abs())
         .fold(0.0f32, f32::max);
-    println!("backbone 255: max |ort - tract| = {diff:e}");
+    println!("backbone 255: max |ort - nn| = {diff:e}");
     c.bench_function("ort_backbone_255", |b| {
         b.iter(|| black_box(backbone(black_box(x), SEARCH_SIDE)))
     });

@@ -447,8 +447,8 @@ pub enum VerifierKind {
     #[default]
     Nanotrack,
     /// The same networks on ONNX Runtime (cargo feature `cnn` and the runtime, from
-    /// `features.cnn.runtime` or `ORT_DYLIB_PATH`): same outputs, ~4× faster per pass than
-    /// tract in a release build here (README "Speed"); what the CNN presets use.
+    /// `features.cnn.runtime` or `ORT_DYLIB_PATH`): same outputs, faster per pass than the
+    /// pure-Rust engine (docs/benchmarks.md); what the CNN presets use.
     NanotrackOrt,
 }
 
@@ -553,7 +553,7 @@ pub enum BoxRefineMode {
     /// The filter's box.
     #[default]
     None,
-    /// NanoTrack v2's head on tract.
+    /// NanoTrack v2's head, in pure Rust ([`crate::nn`]).
     Nanotrack,
     /// NanoTrack v2's head on ONNX Runtime (cargo feature `cnn`).
     NanotrackOrt,

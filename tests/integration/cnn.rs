@@ -632,12 +632,13 @@ fn a_file_that_is_not_onnx_runtime_is_an_error_at_init() {
 }
 
 /// `redetection.verifier: nanotrack_ort` runs the embedded NanoTrack v2 on ONNX Runtime:
-/// its backbone and head outputs equal tract's (to 1e-3 on the reference input), and the
-/// far re-entry is re-acquired on the same frame as under tract (61, returning on 50).
+/// its backbone and head outputs equal the pure-Rust engine's (bevt_core::nn; to 1e-3 on
+/// the reference input), and the far re-entry is re-acquired on the same frame as in pure
+/// Rust (61, returning on 50).
 #[test]
-fn nanotrack_ort_verifier_matches_the_tract_one() {
+fn nanotrack_ort_verifier_matches_the_pure_rust_one() {
     use bevt_core::redetect::nano::NanoVerifier;
-    let Some(rt) = runtime("nanotrack_ort_verifier_matches_the_tract_one") else {
+    let Some(rt) = runtime("nanotrack_ort_verifier_matches_the_pure_rust_one") else {
         return;
     };
     let mut o = NanoVerifier::new_ort(&rt, "", "").unwrap();
@@ -659,7 +660,7 @@ fn nanotrack_ort_verifier_matches_the_tract_one() {
     let (d_x, d_z) = (max_diff(&xo, &xt), max_diff(&zo, &zt));
     let ((mo, lo), (mt, lt)) = (o.head(&zo, &xo).unwrap(), t.head(&zo, &xo).unwrap());
     let (d_m, d_l) = (max_diff(&mo, &mt), max_diff(&lo, &lt));
-    println!("max |ort - tract|: backbone {d_x:e} / {d_z:e}, head {d_m:e} / {d_l:e}");
+    println!("max |ort - nn|: backbone {d_x:e} / {d_z:e}, head {d_m:e} / {d_l:e}");
     assert!(d_x < 1e-3 && d_z < 1e-3 && d_m < 1e-3 && d_l < 1e-2);
     // Wrong runtime: a clear error naming the key.
     let e = NanoVerifier::new_ort(&model("nanotrack/README.md"), "", "").unwrap_err();

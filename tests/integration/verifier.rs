@@ -1,5 +1,5 @@
 //! The NanoTrack v2 re-detection verifier (`redetection.verifier: nanotrack`), run in pure
-//! Rust by tract in every build: the embedded backbone against its reference values, the
+//! Rust by bevt_core::nn in every build: the embedded backbone against its reference values, the
 //! head's outputs, bad model files as clear errors, and the verifier's behaviour on the
 //! lost-state scenes of `bevt_tests::scenes`.
 
@@ -40,11 +40,11 @@ fn reference_inputs() -> (Vec<f32>, Vec<f32>) {
     (x, crop)
 }
 
-/// The embedded backbone under tract reproduces ONNX Runtime 1.31.1's reference values
+/// The embedded backbone under bevt_core::nn reproduces ONNX Runtime 1.31.1's reference values
 /// (models/nanotrack/README.md): means to 1e-4, the first element to 1e-3 (f32 sums in
 /// another order; the two runtimes agree to ~1e-5 here).
 #[test]
-fn embedded_nanotrack_backbone_matches_its_reference_values_under_tract() {
+fn embedded_nanotrack_backbone_matches_its_reference_values_in_pure_rust() {
     let mut v = NanoVerifier::new("", "").unwrap();
     let (x, crop) = reference_inputs();
     let out = v.backbone(&x, 255).unwrap();
@@ -355,7 +355,7 @@ fn verifiers_share_optimised_plans_within_a_process() {
     std::fs::remove_file(&path).unwrap();
     let mut again = NanoVerifier::new(&p, "").expect("the plans of a loaded path are kept");
     assert_eq!(again.backbone(&x, 255).unwrap(), first);
-    // The embedded files under tract are the same network: the same features.
+    // The embedded files are the same network: the same features.
     let embedded = NanoVerifier::new("", "")
         .unwrap()
         .backbone(&x, 255)

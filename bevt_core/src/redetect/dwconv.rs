@@ -1,12 +1,13 @@
-//! A depthwise 2-D convolution for the NanoTrack verifier's tract plans, written so that the
-//! compiler vectorises it on any target (SSE2 on x86_64, NEON on aarch64; no
-//! `target-cpu`, no `unsafe`).
+//! A depthwise 2-D convolution (one group per channel, as in NanoTrack v2's backbone and
+//! head), written so that the compiler vectorises it on any target (SSE2 / AVX2 on x86_64,
+//! NEON on aarch64; no `target-cpu`, no `unsafe`); [`crate::nn`] runs every such `Conv`
+//! node on it.
 //!
-//! tract 0.23.9 runs a depthwise convolution (`Conv` with one group per channel) zone by
-//! zone around each output point (`DepthWise::eval`, with a SIMD inner kernel on x86_64);
-//! in NanoTrack v2's backbone those eight nodes were 35.7 M of a 255×255 pass's 62.6 M
-//! instructions (callgrind), mostly bookkeeping around short runs. Here a channel is
-//! computed kernel row by kernel row over the whole output plane at once:
+//! Written when tract ran the verifier: tract 0.23.9 computed a depthwise convolution zone
+//! by zone around each output point, and in NanoTrack v2's backbone those eight nodes were
+//! 35.7 M of a 255×255 pass's 62.6 M instructions (callgrind), mostly bookkeeping around
+//! short runs. Here a channel is computed kernel row by kernel row over the whole output
+//! plane at once:
 //!
 //! 1. the channel's input plane is copied into a padded scratch plane split by stride
 //!    phase (for stride 2, even and odd rows and columns go to four sub-planes), so that
@@ -20,25 +21,8 @@
 //!    4-wide SSE2 / NEON;
 //! 3. the valid columns are copied to the output.
 //!
-//! The sums run in another order than tract's, so results agree to rounding (tested:
-//! against a naive reference here, against tract's own plan in `nano.rs`, relative
-//! difference under 1e-6 on the backbone's output).
-//!
-//! [`rewrite`] replaces, in a decluttered [`TypedModel`], every `Conv` node that this op
-//! can compute (f32, one group per channel, channel multiplier 1, 2-D, `NCHW` or `CHW`,
-//! `OIHW` kernel, no dilation, constant kernel and bias) with a [`DepthwiseConv`]; the
-//! others keep tract's.
-
-use std::sync::Arc;
-use tract_onnx::prelude::{
-    tvec, DatumType, IntoTValue, OutletId, TValue, TVec, Tensor, TractResult, TypedFact,
-    TypedModel, TypedModelPatch,
-};
-use tract_onnx::tract_core::internal::{
-    as_op, op_as_typed_op, op_out_of_plan, EvalContext, EvalOp, Op, StaticName, TypedOp, Validation,
-};
-use tract_onnx::tract_core::ops::cnn::{Conv, KernelFormat};
-use tract_onnx::tract_core::ops::nn::DataFormat;
+//! Tested against a naive reference here; the networks' outputs against ONNX Runtime's
+//! reference values (`tests/integration/verifier.rs`).
 
 /// The shape of one depthwise convolution (one batch item).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -291,227 +275,6 @@ fn row5(wide: &mut [f32], s: [&[f32]; 5], w: [f32; 5]) {
     for (((((o, &a), &b), &c), &d), &e) in taps {
         *o += w[0] * a + w[1] * b + w[2] * c + w[3] * d + w[4] * e;
     }
-}
-
-/// tract operator running [`depthwise`] with constant weights and bias on one input, a
-/// `[n, c, h, w]` (or `[c, h, w]`) f32 tensor.
-#[derive(Debug, Clone)]
-pub struct DepthwiseConv {
-    geometry: Geometry,
-    batch: usize,
-    out_shape: TVec<usize>,
-    weights: Arc<Vec<f32>>,
-    bias: Arc<Vec<f32>>,
-}
-
-impl PartialEq for DepthwiseConv {
-    fn eq(&self, other: &Self) -> bool {
-        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-        self.geometry == other.geometry
-            && self.batch == other.batch
-            && self.out_shape == other.out_shape
-            && bits(&self.weights) == bits(&other.weights)
-            && bits(&self.bias) == bits(&other.bias)
-    }
-}
-
-impl Eq for DepthwiseConv {}
-
-impl DepthwiseConv {
-    /// The op's geometry.
-    pub fn geometry(&self) -> &Geometry {
-        &self.geometry
-    }
-}
-
-impl Op for DepthwiseConv {
-    fn name(&self) -> StaticName {
-        "BevtDepthwiseConv".into()
-    }
-
-    fn info(&self) -> TractResult<Vec<String>> {
-        Ok(vec![format!("{:?}", self.geometry)])
-    }
-
-    fn validation(&self) -> Validation {
-        Validation::Rounding
-    }
-
-    op_as_typed_op!();
-}
-
-impl EvalOp for DepthwiseConv {
-    op_out_of_plan!();
-
-    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
-        let [input] = &*inputs else {
-            anyhow_bail(format!("{} inputs; expected 1", inputs.len()))?
-        };
-        let view = input.try_as_plain_ram()?;
-        let data = view.as_slice::<f32>()?;
-        let g = &self.geometry;
-        let (per_in, per_out) = (g.channels * g.in_plane(), g.channels * g.out_plane());
-        if data.len() != self.batch * per_in {
-            anyhow_bail(format!(
-                "input of {} values; expected {}",
-                data.len(),
-                self.batch * per_in
-            ))?;
-        }
-        // Written in place: every value is overwritten, the zeroing is tract's only safe
-        // allocation (converting a Vec or an ndarray copies it).
-        let mut t = Tensor::zero::<f32>(&self.out_shape)?;
-        {
-            let mut view = t.try_as_plain_ram_mut()?;
-            let out = view.as_slice_mut::<f32>()?;
-            let mut scratch = Scratch::default();
-            for n in 0..self.batch {
-                let ok = depthwise(
-                    g,
-                    &data[n * per_in..(n + 1) * per_in],
-                    &self.weights,
-                    &self.bias,
-                    &mut out[n * per_out..(n + 1) * per_out],
-                    &mut scratch,
-                );
-                if !ok {
-                    anyhow_bail("inconsistent depthwise geometry".to_string())?;
-                }
-            }
-        }
-        Ok(tvec!(t.into_tvalue()))
-    }
-}
-
-/// A tract error carrying `msg`.
-fn anyhow_bail<T>(msg: String) -> TractResult<T> {
-    Err(tract_onnx::prelude::TractError::msg(msg))
-}
-
-impl TypedOp for DepthwiseConv {
-    fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
-        let [input] = inputs else {
-            return anyhow_bail(format!("{} inputs; expected 1", inputs.len()));
-        };
-        if input.datum_type != DatumType::F32 {
-            return anyhow_bail(format!("input {:?}; expected f32", input.datum_type));
-        }
-        Ok(tvec!(TypedFact::dt_shape(
-            DatumType::F32,
-            self.out_shape.as_slice()
-        )))
-    }
-
-    as_op!();
-}
-
-/// The [`DepthwiseConv`] computing `conv` on `model`'s `inputs`, or `None` when this op
-/// cannot (see the module doc).
-fn replacement(
-    model: &TypedModel,
-    conv: &Conv,
-    inputs: &[OutletId],
-) -> TractResult<Option<DepthwiseConv>> {
-    let spec = &conv.pool_spec;
-    let channels = spec.input_channels;
-    if conv.q_params.is_some()
-        || inputs.len() != 3
-        || conv.group != channels
-        || spec.output_channels != channels
-        || spec.kernel_shape.len() != 2
-        || spec.dilations().iter().any(|&d| d != 1)
-        || conv.kernel_fmt != KernelFormat::OIHW
-        || !matches!(spec.data_format, DataFormat::NCHW | DataFormat::CHW)
-    {
-        return Ok(None);
-    }
-    let data = model.outlet_fact(inputs[0])?;
-    let Some(shape) = data.shape.as_concrete() else {
-        return Ok(None);
-    };
-    let (batch, c, h, w) = match (spec.data_format, shape) {
-        (DataFormat::NCHW, &[n, c, h, w]) => (n, c, h, w),
-        (DataFormat::CHW, &[c, h, w]) => (1, c, h, w),
-        _ => return Ok(None),
-    };
-    if data.datum_type != DatumType::F32 || c != channels {
-        return Ok(None);
-    }
-    let (k_h, k_w) = (spec.kernel_shape[0], spec.kernel_shape[1]);
-    let (Some(kernel), Some(bias)) = (
-        model.outlet_fact(inputs[1])?.konst.clone(),
-        model.outlet_fact(inputs[2])?.konst.clone(),
-    ) else {
-        return Ok(None);
-    };
-    if kernel.datum_type() != DatumType::F32
-        || kernel.shape() != [channels, 1, k_h, k_w]
-        || bias.datum_type() != DatumType::F32
-        || !(bias.len() == channels || bias.len() == 1)
-    {
-        return Ok(None);
-    }
-    let weights = kernel.try_as_plain_ram()?.as_slice::<f32>()?.to_vec();
-    let bias_view = bias.try_as_plain_ram()?;
-    let b = bias_view.as_slice::<f32>()?;
-    let bias = if b.len() == 1 {
-        vec![b[0]; channels]
-    } else {
-        b.to_vec()
-    };
-    let pads = spec.computed_padding(&[h, w]);
-    let strides = spec.strides();
-    let Some(geometry) = Geometry::new(
-        channels,
-        (h, w),
-        (k_h, k_w),
-        (strides[0], strides[1]),
-        (pads[0].pad_before, pads[0].pad_after),
-        (pads[1].pad_before, pads[1].pad_after),
-    ) else {
-        return Ok(None);
-    };
-    if geometry.out_h != pads[0].convoluted || geometry.out_w != pads[1].convoluted {
-        return Ok(None);
-    }
-    let out_shape: TVec<usize> = match spec.data_format {
-        DataFormat::NCHW => tvec![batch, c, geometry.out_h, geometry.out_w],
-        _ => tvec![c, geometry.out_h, geometry.out_w],
-    };
-    Ok(Some(DepthwiseConv {
-        geometry,
-        batch,
-        out_shape,
-        weights: Arc::new(weights),
-        bias: Arc::new(bias),
-    }))
-}
-
-/// Replaces every depthwise `Conv` of `model` (decluttered, before `optimize`) that
-/// [`DepthwiseConv`] can compute; returns how many were replaced.
-///
-/// # Errors
-/// A tract error from reading the model or applying a patch.
-pub fn rewrite(model: &mut TypedModel) -> TractResult<usize> {
-    let mut replaced = 0;
-    for id in model.eval_order()? {
-        let node = model.node(id);
-        let Some(conv) = node.op_as::<Conv>() else {
-            continue;
-        };
-        let Some(op) = replacement(model, conv, &node.inputs)? else {
-            continue;
-        };
-        // Same output fact as the Conv's, or leave it.
-        let before = model.outlet_fact(OutletId::new(id, 0))?;
-        if before.shape.as_concrete() != Some(op.out_shape.as_slice()) {
-            continue;
-        }
-        let patch = TypedModelPatch::replace_single_op(model, node, &node.inputs[..1], op)?;
-        patch.apply(model)?;
-        replaced += 1;
-    }
-    Ok(replaced)
 }
 
 #[cfg(test)]

@@ -1,5 +1,5 @@
 //! NanoTrack v2 as a learned re-detection verifier (`redetection.verifier: nanotrack`),
-//! run in pure Rust by `tract` (no ONNX Runtime, no cargo feature).
+//! run in pure Rust by [`crate::nn`] (no ONNX Runtime, no cargo feature).
 //!
 //! The tracking-trained Siamese network scores a search region against a template taken on
 //! the initial frame: the backbone turns a 127×127 template crop (context side
@@ -16,11 +16,8 @@
 //! The models: empty `redetection.verifier_backbone` / `verifier_head` mean the NanoTrack v2
 //! files embedded in this crate (`models/nanotrack/`, see its README for origin, licence and
 //! sha256), so the default needs no file at run time; a path loads that file instead. Each
-//! network is optimised once per input size (backbone: 127 and 255) and run single-threaded.
-//! Before tract's optimisation, the depthwise convolutions (the backbone's eight, the
-//! head's twelve) are replaced by [`dwconv`]'s vectorised kernel: 2.2× fewer instructions
-//! for them, the outputs within rounding of tract's own plans (tested).
-//! The head is optimised as its two branches, each alone: the classification branch (the
+//! network is planned once per input size (backbone: 127 and 255) and run single-threaded.
+//! The head is planned as its two branches, each alone: the classification branch (the
 //! scores) and the box regression branch. They share no node after the inputs, so together
 //! they compute what the whole head does, bit for bit (tested); a search that needs only the
 //! score ([`Verifier::search_above`]: the drift check, a lost-state window below the bar)
@@ -28,20 +25,17 @@
 //!
 //! With the cargo feature `cnn`, `redetection.verifier: nanotrack_ort` runs the same models
 //! (same crops, scoring and acceptance) on ONNX Runtime instead (`NanoVerifier::new_ort`),
-//! one thread: ~7× faster per pass than tract here (README "Speed"), at the price of the
-//! shared library.
+//! one thread (docs/benchmarks.md has the per-pass figures), at the price of the shared
+//! library.
 
 use crate::error::TrackError;
 use crate::geometry::Point2;
 use crate::image::{Frame, Patch, Sampler};
-use crate::redetect::{context_side, dwconv, Scored, Verifier, VerifierHit};
+use crate::nn;
+use crate::redetect::{context_side, Scored, Verifier, VerifierHit};
 use std::path::Path;
 use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 use thiserror::Error;
-use tract_onnx::prelude::{
-    tvec, DatumType, Framework, InferenceFact, InferenceModel, InferenceModelExt, Tensor,
-    TypedSimplePlan, TypedSimpleState,
-};
 
 /// Template crop side, pixels.
 pub const TEMPLATE_SIDE: usize = 127;
@@ -152,14 +146,14 @@ const BACKBONE_KEY: &str = "redetection.verifier_backbone";
 /// Config key of the head path.
 const HEAD_KEY: &str = "redetection.verifier_head";
 
-/// One optimised network's plan and where it came from (shared between verifiers).
+/// One planned network and where it came from (shared between verifiers).
 struct Planned {
-    plan: Arc<TypedSimplePlan>,
+    plan: Arc<nn::Plan>,
     key: &'static str,
     path: String,
 }
 
-/// The optimised networks of one (backbone, head) pair: the backbone at both input sizes
+/// The planned networks of one (backbone, head) pair: the backbone at both input sizes
 /// and the head's two branches (see the module doc).
 struct Plans {
     template: Planned,
@@ -168,10 +162,10 @@ struct Plans {
     reg: Planned,
 }
 
-/// Optimised plans by `(verifier_backbone, verifier_head)` as configured (empty: embedded).
-/// Optimising the three networks takes ~0.1–0.2 s; every tracker of the process (each
-/// sequence of an evaluation, each node restart of the tracker) shares them and keeps only
-/// its own run states. A model file is therefore read once per process and path.
+/// Plans by `(verifier_backbone, verifier_head)` as configured (empty: embedded). Every
+/// tracker of the process (each sequence of an evaluation, each node restart of the
+/// tracker) shares them and keeps only its own buffers. A model file is therefore read
+/// once per process and path.
 type PlanCache = Mutex<Vec<((String, String), Arc<Plans>)>>;
 
 /// The process's [`PlanCache`].
@@ -180,72 +174,43 @@ fn plan_cache() -> &'static PlanCache {
     CACHE.get_or_init(|| Mutex::new(Vec::new()))
 }
 
-/// At most this many (backbone, head) pairs stay optimised (a process uses one).
+/// At most this many (backbone, head) pairs stay planned (a process uses one).
 const MAX_CACHED_PLANS: usize = 4;
 
-/// One optimised network: its shared plan, a reusable run state, and where it came from.
+/// One planned network: its buffers, and where it came from.
 struct Net {
-    state: TypedSimpleState,
+    runner: nn::Runner,
     key: &'static str,
     path: String,
 }
 
 impl Net {
-    /// A run state of `p`.
-    fn new(p: &Planned) -> Result<Self, NanoError> {
-        let state = TypedSimpleState::new(&p.plan).map_err(|e| NanoError::Model {
+    /// Buffers for `p`.
+    fn new(p: &Planned) -> Self {
+        Self {
+            runner: nn::Runner::new(Arc::clone(&p.plan)),
             key: p.key,
             path: p.path.clone(),
-            reason: format!("{e:#}"),
-        })?;
-        Ok(Self {
-            state,
-            key: p.key,
-            path: p.path.clone(),
-        })
+        }
     }
 }
 
 impl Planned {
-    /// Optimises `model` with `inputs` (names and shapes) and `outputs` (names); with
-    /// `fast_depthwise`, its depthwise convolutions run on [`dwconv`] instead of tract's
-    /// kernel (see the module doc).
+    /// Plans `model` for `inputs` (names and shapes) and `outputs` (names).
     fn new(
-        model: &InferenceModel,
+        model: &nn::onnx::Model,
         key: &'static str,
         path: &str,
         inputs: &[(&str, &[usize])],
         outputs: &[&str],
-        fast_depthwise: bool,
     ) -> Result<Self, NanoError> {
-        let err = |e: tract_onnx::prelude::TractError| NanoError::Model {
+        let plan = nn::Plan::new(model, inputs, outputs).map_err(|reason| NanoError::Model {
             key,
             path: path.to_string(),
-            reason: format!("{e:#}"),
-        };
-        let mut m = model
-            .clone()
-            .with_input_names(inputs.iter().map(|(n, _)| *n))
-            .map_err(err)?
-            .with_outputs_by_name(outputs.iter().copied())
-            .map_err(err)?;
-        for (i, (_, shape)) in inputs.iter().enumerate() {
-            let fact = InferenceFact::dt_shape(DatumType::F32, shape.to_vec());
-            m.set_input_fact(i, fact).map_err(err)?;
-        }
-        for o in 0..outputs.len() {
-            m.set_output_fact(o, InferenceFact::default())
-                .map_err(err)?;
-        }
-        let mut typed = m.into_typed().map_err(err)?;
-        typed.declutter().map_err(err)?;
-        if fast_depthwise {
-            dwconv::rewrite(&mut typed).map_err(err)?;
-        }
-        typed.optimize().map_err(err)?;
-        let plan = TypedSimplePlan::new(typed).map_err(err)?;
+            reason,
+        })?;
         Ok(Self {
-            plan,
+            plan: Arc::new(plan),
             key,
             path: path.to_string(),
         })
@@ -260,49 +225,45 @@ impl Net {
         inputs: &[(&[usize], &[f32])],
         expected: &[(&'static str, &[usize])],
     ) -> Result<Vec<Vec<f32>>, NanoError> {
-        let run_err = |reason: String| NanoError::Run {
+        let shapes: Vec<Vec<usize>> = self
+            .runner
+            .plan()
+            .output_shapes()
+            .iter()
+            .map(|s| s.to_vec())
+            .collect();
+        let data: Vec<&[f32]> = inputs.iter().map(|(_, d)| *d).collect();
+        let outputs = self.runner.run(&data).map_err(|reason| NanoError::Run {
             key: self.key,
             path: self.path.clone(),
             reason,
-        };
-        let mut tv = tvec![];
-        for (shape, data) in inputs {
-            let t = Tensor::from_shape(shape, data).map_err(|e| run_err(format!("{e:#}")))?;
-            tv.push(t.into());
-        }
-        let outputs = self.state.run(tv).map_err(|e| run_err(format!("{e:#}")))?;
+        })?;
         if outputs.len() != expected.len() {
-            return Err(run_err(format!(
-                "{} outputs; expected {}",
-                outputs.len(),
-                expected.len()
-            )));
+            return Err(NanoError::Run {
+                key: self.key,
+                path: self.path.clone(),
+                reason: format!("{} outputs; expected {}", outputs.len(), expected.len()),
+            });
         }
         let mut out = Vec::with_capacity(expected.len());
-        for (value, &(name, shape)) in outputs.iter().zip(expected) {
-            if value.shape() != shape {
+        for ((value, shape), &(name, want)) in outputs.iter().zip(&shapes).zip(expected) {
+            if shape.as_slice() != want {
                 return Err(NanoError::Shape {
                     key: self.key,
                     path: self.path.clone(),
                     name,
-                    shape: value.shape().to_vec(),
-                    expected: shape.to_vec(),
+                    shape: shape.clone(),
+                    expected: want.to_vec(),
                 });
             }
-            let view = value
-                .try_as_plain_ram()
-                .map_err(|e| run_err(format!("{name}: {e:#}")))?;
-            let data = view
-                .as_slice::<f32>()
-                .map_err(|e| run_err(format!("{name}: {e:#}")))?;
-            if data.iter().any(|v| !v.is_finite()) {
+            if value.iter().any(|v| !v.is_finite()) {
                 return Err(NanoError::NonFinite {
                     key: self.key,
                     path: self.path.clone(),
                     name,
                 });
             }
-            out.push(data.to_vec());
+            out.push(value.to_vec());
         }
         Ok(out)
     }
@@ -313,7 +274,7 @@ fn load(
     key: &'static str,
     path: &str,
     embedded: &'static [u8],
-) -> Result<(InferenceModel, String), NanoError> {
+) -> Result<(nn::onnx::Model, String), NanoError> {
     let (bytes, name) = if path.is_empty() {
         (std::borrow::Cow::Borrowed(embedded), EMBEDDED.to_string())
     } else {
@@ -340,20 +301,18 @@ fn load(
         let bytes = std::fs::read(p).map_err(|e| read_err(e.to_string()))?;
         (std::borrow::Cow::Owned(bytes), path.to_string())
     };
-    let model = tract_onnx::onnx()
-        .model_for_read(&mut &bytes[..])
-        .map_err(|e| NanoError::Model {
-            key,
-            path: name.clone(),
-            reason: format!("{e:#}"),
-        })?;
+    let model = nn::onnx::parse(&bytes).map_err(|reason| NanoError::Model {
+        key,
+        path: name.clone(),
+        reason,
+    })?;
     Ok((model, name))
 }
 
 /// The networks' runtime.
 enum Backend {
-    /// tract plans: backbone at 127 and at 255, the head's two branches.
-    Tract {
+    /// [`nn`] plans: backbone at 127 and at 255, the head's two branches.
+    Native {
         template: Box<Net>,
         search: Box<Net>,
         cls: Box<Net>,
@@ -368,7 +327,7 @@ impl Backend {
     /// Where the backbone and the head came from.
     fn paths(&self) -> (&str, &str) {
         match self {
-            Backend::Tract { search, cls, .. } => (&search.path, &cls.path),
+            Backend::Native { search, cls, .. } => (&search.path, &cls.path),
             #[cfg(feature = "cnn")]
             Backend::Ort(o) => (&o.backbone_path, &o.head_path),
         }
@@ -413,10 +372,10 @@ impl NanoVerifier {
             .map(|(_, p)| Arc::clone(p));
         if let Some(plans) = cached {
             // Checked when they were first optimised.
-            return Ok(Self::on(Self::tract_backend(&plans)?));
+            return Ok(Self::on(Self::native_backend(&plans)));
         }
         let plans = Arc::new(Self::optimise(backbone, head)?);
-        let v = Self::checked(Self::tract_backend(&plans)?)?;
+        let v = Self::checked(Self::native_backend(&plans))?;
         let mut cache = plan_cache().lock().unwrap_or_else(PoisonError::into_inner);
         if !cache.iter().any(|(k, _)| *k == id) {
             if cache.len() >= MAX_CACHED_PLANS {
@@ -439,7 +398,6 @@ impl NanoVerifier {
                 &bb_name,
                 &[("input", &[1, 3, side, side])],
                 &["output"],
-                true,
             )
         };
         let template = backbone_plan(TEMPLATE_SIDE)?;
@@ -455,7 +413,6 @@ impl NanoVerifier {
                     ("input2", &[1, CHANNELS, x, x]),
                 ],
                 outputs,
-                true,
             )
         };
         Ok(Plans {
@@ -466,14 +423,14 @@ impl NanoVerifier {
         })
     }
 
-    /// Fresh run states of `plans`.
-    fn tract_backend(plans: &Plans) -> Result<Backend, NanoError> {
-        Ok(Backend::Tract {
-            template: Box::new(Net::new(&plans.template)?),
-            search: Box::new(Net::new(&plans.search)?),
-            cls: Box::new(Net::new(&plans.cls)?),
-            reg: Box::new(Net::new(&plans.reg)?),
-        })
+    /// Fresh buffers for `plans`.
+    fn native_backend(plans: &Plans) -> Backend {
+        Backend::Native {
+            template: Box::new(Net::new(&plans.template)),
+            search: Box::new(Net::new(&plans.search)),
+            cls: Box::new(Net::new(&plans.cls)),
+            reg: Box::new(Net::new(&plans.reg)),
+        }
     }
 
     /// The same models on ONNX Runtime (`runtime`, or `ORT_DYLIB_PATH` when empty; an empty
@@ -587,7 +544,7 @@ impl NanoVerifier {
     /// `[1,48,side/16,side/16]` features.
     fn run_backbone(&mut self, side: usize) -> Result<Vec<f32>, NanoError> {
         let (template, search) = match &mut self.backend {
-            Backend::Tract {
+            Backend::Native {
                 template, search, ..
             } => (template, search),
             #[cfg(feature = "cnn")]
@@ -626,7 +583,7 @@ impl NanoVerifier {
     ) -> Result<(Vec<f32>, Option<Vec<f32>>), NanoError> {
         let (t, x) = (TEMPLATE_CELLS, SEARCH_CELLS);
         let (cls, reg) = match &mut self.backend {
-            Backend::Tract { cls, reg, .. } => (cls, reg),
+            Backend::Native { cls, reg, .. } => (cls, reg),
             #[cfg(feature = "cnn")]
             Backend::Ort(o) => {
                 let (cls, loc) = o.head(&self.template, &self.search)?;
@@ -811,10 +768,9 @@ mod tests {
                 ("input2", &[1, CHANNELS, x, x]),
             ],
             &["output1", "output2"],
-            true,
         )
         .unwrap();
-        let mut net = Net::new(&plan).unwrap();
+        let mut net = Net::new(&plan);
         let mut out = net
             .run(
                 &[
@@ -828,111 +784,6 @@ mod tests {
         let cls = out.swap_remove(0);
         let n = x * x;
         ((0..n).map(|i| cls[n + i] - cls[i]).collect(), loc)
-    }
-
-    /// Largest `|a − b|` over the largest `|b|` (how far `a` is from `b` at `b`'s scale).
-    fn relative_diff(a: &[f32], b: &[f32]) -> f32 {
-        assert_eq!(a.len(), b.len());
-        let scale = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
-        let diff = a
-            .iter()
-            .zip(b)
-            .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
-        diff / scale.max(f32::MIN_POSITIVE)
-    }
-
-    /// The backbone at both sizes and the whole head, planned with [`dwconv`] in place of
-    /// tract's depthwise kernel, against tract's own plans on the same inputs: every output
-    /// within 1e-4 of the output's scale (measured: under 1e-6). And the rewrite did happen:
-    /// the backbone's eight depthwise convolutions and the head's twelve are replaced, and
-    /// the backbone's output bits differ from tract's.
-    #[test]
-    fn fast_depthwise_plans_match_tracts_own_plans() {
-        let (bb, bb_name) = load(BACKBONE_KEY, "", EMBEDDED_BACKBONE).unwrap();
-        let (hd, hd_name) = load(HEAD_KEY, "", EMBEDDED_HEAD).unwrap();
-        let mut typed = bb
-            .clone()
-            .with_input_fact(
-                0,
-                InferenceFact::dt_shape(DatumType::F32, vec![1, 3, 255, 255]),
-            )
-            .unwrap()
-            .into_typed()
-            .unwrap();
-        typed.declutter().unwrap();
-        let backbone_replaced = dwconv::rewrite(&mut typed).unwrap();
-        assert_eq!(backbone_replaced, expected_rewrites(8), "backbone");
-        let mut head = hd
-            .clone()
-            .with_input_fact(
-                0,
-                InferenceFact::dt_shape(DatumType::F32, vec![1, CHANNELS, 8, 8]),
-            )
-            .unwrap()
-            .with_input_fact(
-                1,
-                InferenceFact::dt_shape(DatumType::F32, vec![1, CHANNELS, 16, 16]),
-            )
-            .unwrap()
-            .into_typed()
-            .unwrap();
-        head.declutter().unwrap();
-        let head_replaced = dwconv::rewrite(&mut head).unwrap();
-        assert!(head_replaced <= 12, "head: {head_replaced}");
-        #[cfg(target_arch = "x86_64")]
-        assert_eq!(head_replaced, 12, "head");
-        let run =
-            |plan: &Planned, inputs: &[(&[usize], &[f32])], out: &[(&'static str, &[usize])]| {
-                Net::new(plan).unwrap().run(inputs, out).unwrap()
-            };
-        let mut features = Vec::new();
-        for (side, cells) in [(TEMPLATE_SIDE, TEMPLATE_CELLS), (SEARCH_SIDE, SEARCH_CELLS)] {
-            let input: Vec<f32> = (0..3 * side * side)
-                .map(|i| ((i * 7919 % 256) as f32 + (i / side) as f32 * 0.5) % 256.0)
-                .collect();
-            let shape: &[usize] = &[1, 3, side, side];
-            let out: &[(&str, &[usize])] = &[("output", &[1, CHANNELS, cells, cells])];
-            let io = [("input", shape)];
-            let fast = Planned::new(&bb, BACKBONE_KEY, &bb_name, &io, &["output"], true).unwrap();
-            let slow = Planned::new(&bb, BACKBONE_KEY, &bb_name, &io, &["output"], false).unwrap();
-            let a = run(&fast, &[(shape, &input)], out).swap_remove(0);
-            let b = run(&slow, &[(shape, &input)], out).swap_remove(0);
-            let d = relative_diff(&a, &b);
-            assert!(d <= 1e-4, "backbone {side}: {d}");
-            assert_ne!(
-                bits(&a),
-                bits(&b),
-                "the same bits: was the rewrite applied?"
-            );
-            features.push(b);
-        }
-        let (t, x) = (TEMPLATE_CELLS, SEARCH_CELLS);
-        let (ts, xs): (&[usize], &[usize]) = (&[1, CHANNELS, t, t], &[1, CHANNELS, x, x]);
-        let io = [("input1", ts), ("input2", xs)];
-        let names = ["output1", "output2"];
-        let out: &[(&str, &[usize])] = &[("output1", &[1, 2, x, x]), ("output2", &[1, 4, x, x])];
-        let inputs: &[(&[usize], &[f32])] = &[(ts, &features[0]), (xs, &features[1])];
-        let fast = Planned::new(&hd, HEAD_KEY, &hd_name, &io, &names, true).unwrap();
-        let slow = Planned::new(&hd, HEAD_KEY, &hd_name, &io, &names, false).unwrap();
-        let a = run(&fast, inputs, out);
-        let b = run(&slow, inputs, out);
-        for (name, (a, b)) in names.iter().zip(a.iter().zip(&b)) {
-            let d = relative_diff(a, b);
-            assert!(d <= 1e-4, "head {name}: {d}");
-        }
-    }
-
-    /// How many of `all` depthwise convolutions [`dwconv::rewrite`] replaces on this
-    /// architecture. On x86_64 tract's declutter keeps them channel-first, and all are
-    /// replaced. On aarch64 it makes the backbone's depthwise convolutions after the first
-    /// channel-last (`HWC`, seen under qemu-aarch64 on 2026-11-26), which the kernel does
-    /// not take: only the first is replaced there (docs/benchmarks.md).
-    fn expected_rewrites(all: usize) -> usize {
-        if cfg!(target_arch = "x86_64") {
-            all
-        } else {
-            1
-        }
     }
 
     fn bits(v: &[f32]) -> Vec<u32> {

@@ -1,0 +1,1338 @@
+//! A small pure-Rust inference engine for the convolutional networks the tracker embeds
+//! (NanoTrack v2's backbone and head, the re-detection verifier): an ONNX file is read
+//! ([`onnx`]), and [`Plan::new`] turns it, for fixed input shapes and the outputs asked
+//! for, into a list of steps over buffers sized once; a [`Runner`] owns the buffers and
+//! runs the steps. Single-threaded and allocation-free per run.
+//!
+//! Operators: `Conv` (any groups; 1 × 1 as a matrix product, depthwise through
+//! [`crate::redetect::dwconv`], the rest through im2col and a matrix product), `Gemm`,
+//! `MatMul`, `Relu`, `Sigmoid`, `Exp`, `HardSigmoid`, `HardSwish`, `Clip`, `Add`, `Sub`,
+//! `Mul`, `Div` (numpy broadcasting), `GlobalAveragePool`, `Reshape`, `Flatten`,
+//! `Transpose`, `Identity`, `Constant`. Another operator, a computed convolution kernel or a
+//! dilation is a clear error at plan time. Only the nodes the requested outputs depend on
+//! are planned, so one head can be planned as its classification branch alone.
+//!
+//! Why not tract (what ran these networks before): it was the largest part of the build
+//! (tract-core, -linalg, -data and the ONNX import, about half of a cold release build's
+//! unit-seconds) for two small networks that use the operators above; docs/benchmarks.md
+//! has the measured build and per-pass figures.
+
+pub mod onnx;
+mod ops;
+
+use crate::redetect::dwconv;
+use onnx::{Attr, Data, Model, Node, Tensor};
+use ops::{Binary, Broadcast, ConvShape, Unary};
+use std::collections::HashMap;
+
+/// Largest number of f32 values a plan's buffers may hold together (256 MB): a model
+/// cannot make the process allocate more, whatever its shapes declare.
+pub const MAX_PLAN_VALUES: usize = 64 << 20;
+
+/// A value while planning: a constant, or a buffer of the runner and its shape.
+#[derive(Debug, Clone)]
+enum Val {
+    Const(Tensor),
+    Buf { slot: usize, shape: Vec<usize> },
+}
+
+/// How a convolution is computed.
+#[derive(Debug, Clone)]
+enum ConvKind {
+    /// 1 × 1, stride 1, no padding, one group: a matrix product.
+    Pointwise,
+    /// One group per channel, one output per group.
+    Depthwise(dwconv::Geometry),
+    /// im2col then a matrix product, per group.
+    General,
+}
+
+/// One step of a plan.
+#[derive(Debug, Clone)]
+enum Step {
+    Conv {
+        x: usize,
+        y: usize,
+        batch: usize,
+        shape: ConvShape,
+        kind: ConvKind,
+        weights: Vec<f32>,
+        bias: Vec<f32>,
+        /// An activation fused in (applied to the output in place).
+        act: Option<Unary>,
+    },
+    Unary {
+        x: usize,
+        y: usize,
+        f: Unary,
+    },
+    Binary {
+        a: usize,
+        b: usize,
+        y: usize,
+        op: Binary,
+        bc: Broadcast,
+        act: Option<Unary>,
+    },
+    /// `y[batch][m×n] = α · a[batch][m×k] · b[batch][k×n] + bias` (strided operands).
+    MatMul {
+        a: usize,
+        b: usize,
+        y: usize,
+        batch: usize,
+        mkn: (usize, usize, usize),
+        a_strides: (usize, usize, usize),
+        b_strides: (usize, usize, usize),
+        alpha: f32,
+        /// β · C, broadcast to `[m, n]` (Gemm's third input), copied into `y` first.
+        bias: Option<Vec<f32>>,
+        act: Option<Unary>,
+    },
+    MeanPool {
+        x: usize,
+        y: usize,
+        len: usize,
+    },
+    Transpose {
+        x: usize,
+        y: usize,
+        shape: Vec<usize>,
+        perm: Vec<usize>,
+    },
+}
+
+/// A network planned for fixed input shapes (see the module doc). Shared between runners.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    steps: Vec<Step>,
+    /// Length of each buffer.
+    slots: Vec<usize>,
+    /// Buffers holding constants, filled when a runner is made.
+    init: Vec<(usize, Vec<f32>)>,
+    inputs: Vec<(String, usize, Vec<usize>)>,
+    outputs: Vec<(String, usize, Vec<usize>)>,
+    /// Largest im2col buffer a step needs.
+    col_len: usize,
+}
+
+/// A planning error: what is wrong or unsupported, in words.
+pub type Error = String;
+
+fn attr_int(n: &Node, name: &str, default: i64) -> Result<i64, Error> {
+    match n.attrs.get(name) {
+        None => Ok(default),
+        Some(Attr::Int(i)) => Ok(*i),
+        Some(a) => Err(format!("{}: attribute {name} is {a:?}, not an int", who(n))),
+    }
+}
+
+fn attr_float(n: &Node, name: &str, default: f32) -> Result<f32, Error> {
+    match n.attrs.get(name) {
+        None => Ok(default),
+        Some(Attr::Float(f)) => Ok(*f),
+        Some(a) => Err(format!(
+            "{}: attribute {name} is {a:?}, not a float",
+            who(n)
+        )),
+    }
+}
+
+fn attr_ints(n: &Node, name: &str) -> Result<Option<Vec<i64>>, Error> {
+    match n.attrs.get(name) {
+        None => Ok(None),
+        Some(Attr::Ints(v)) => Ok(Some(v.clone())),
+        Some(a) => Err(format!("{}: attribute {name} is {a:?}, not ints", who(n))),
+    }
+}
+
+/// A node as messages name it.
+fn who(n: &Node) -> String {
+    if n.name.is_empty() {
+        format!("{} node", n.op_type)
+    } else {
+        format!("{} node `{}`", n.op_type, n.name)
+    }
+}
+
+fn to_usize(v: &[i64], what: &str) -> Result<Vec<usize>, Error> {
+    v.iter()
+        .map(|&x| usize::try_from(x).map_err(|_| format!("{what}: {x} is not a size")))
+        .collect()
+}
+
+/// The plan under construction.
+struct Builder {
+    vals: HashMap<String, Val>,
+    /// How many times each value is read (by the planned nodes and as an output).
+    uses: HashMap<String, usize>,
+    /// The value the last step wrote (by name: a reshaped alias of it does not count).
+    last_out: Option<String>,
+    plan: Plan,
+    total: usize,
+}
+
+impl Builder {
+    fn slot(&mut self, shape: &[usize]) -> Result<usize, Error> {
+        let n = Tensor::count(shape).ok_or("a tensor size overflows")?;
+        self.total = self.total.saturating_add(n);
+        if self.total > MAX_PLAN_VALUES {
+            return Err(format!(
+                "the network's tensors need more than {MAX_PLAN_VALUES} values at these input \
+                 sizes (the bound on a plan's memory)"
+            ));
+        }
+        self.plan.slots.push(n);
+        Ok(self.plan.slots.len() - 1)
+    }
+
+    /// A buffer holding `v` (a constant is copied into one, filled when a runner is made).
+    fn buf(&mut self, v: &Val) -> Result<(usize, Vec<usize>), Error> {
+        match v {
+            Val::Buf { slot, shape } => Ok((*slot, shape.clone())),
+            Val::Const(t) => {
+                let slot = self.slot(&t.dims)?;
+                self.plan.init.push((slot, t.to_f32()));
+                Ok((slot, t.dims.clone()))
+            }
+        }
+    }
+
+    fn get(&self, n: &Node, i: usize) -> Result<Option<Val>, Error> {
+        match n.inputs.get(i).filter(|s| !s.is_empty()) {
+            None => Ok(None),
+            Some(name) => self
+                .vals
+                .get(name)
+                .cloned()
+                .map(Some)
+                .ok_or_else(|| format!("{}: input `{name}` is not defined before it", who(n))),
+        }
+    }
+
+    fn need(&self, n: &Node, i: usize) -> Result<Val, Error> {
+        self.get(n, i)?
+            .ok_or_else(|| format!("{}: input {i} is missing", who(n)))
+    }
+
+    fn constant(&self, n: &Node, i: usize, what: &str) -> Result<Option<Tensor>, Error> {
+        match self.get(n, i)? {
+            None => Ok(None),
+            Some(Val::Const(t)) => Ok(Some(t)),
+            Some(Val::Buf { .. }) => Err(format!(
+                "{}: its {what} (input {i}) must be a constant of the model",
+                who(n)
+            )),
+        }
+    }
+
+    fn out(&mut self, n: &Node, shape: Vec<usize>) -> Result<usize, Error> {
+        let slot = self.slot(&shape)?;
+        let name = n
+            .outputs
+            .first()
+            .ok_or_else(|| format!("{}: no output", who(n)))?;
+        self.vals.insert(name.clone(), Val::Buf { slot, shape });
+        self.last_out = Some(name.clone());
+        Ok(slot)
+    }
+
+    /// Fuses activation `f` of node `n` into the last step when that step wrote `n`'s input
+    /// and nothing else reads it (not another node, not an output): the activation then runs
+    /// in place on the step's output, saving a buffer and a pass over it. Returns whether it
+    /// did.
+    fn fuse(&mut self, n: &Node, f: Unary) -> bool {
+        let (Some(input), Some(output)) = (n.inputs.first(), n.outputs.first()) else {
+            return false;
+        };
+        if self.uses.get(input.as_str()).copied().unwrap_or(0) != 1
+            || self.last_out.as_ref() != Some(input)
+        {
+            return false;
+        }
+        let Some(Val::Buf { slot, shape }) = self.vals.get(input).cloned() else {
+            return false;
+        };
+        let written = match self.plan.steps.last_mut() {
+            Some(Step::Conv { y, act, .. })
+            | Some(Step::Binary { y, act, .. })
+            | Some(Step::MatMul { y, act, .. }) => (*y == slot && act.is_none()).then_some(act),
+            _ => None,
+        };
+        let Some(act) = written else {
+            return false;
+        };
+        *act = Some(f);
+        self.vals.insert(output.clone(), Val::Buf { slot, shape });
+        true
+    }
+
+    fn node(&mut self, n: &Node) -> Result<(), Error> {
+        if !n.domain.is_empty() && n.domain != "ai.onnx" {
+            return Err(format!(
+                "{}: operator domain `{}` is not supported",
+                who(n),
+                n.domain
+            ));
+        }
+        match n.op_type.as_str() {
+            "Conv" => self.conv(n),
+            "Relu" | "Sigmoid" | "Exp" | "HardSigmoid" | "HardSwish" | "Clip" => {
+                let f = match n.op_type.as_str() {
+                    "Relu" => Unary::Relu,
+                    "Sigmoid" => Unary::Sigmoid,
+                    "Exp" => Unary::Exp,
+                    "HardSwish" => Unary::HardSwish,
+                    "HardSigmoid" => Unary::HardSigmoid(
+                        attr_float(n, "alpha", 0.2)?,
+                        attr_float(n, "beta", 0.5)?,
+                    ),
+                    _ => {
+                        let bound = |i: usize, attr: &str, d: f32| -> Result<f32, Error> {
+                            match self.constant(n, i, attr)? {
+                                Some(t) if t.dims.iter().product::<usize>() == 1 => {
+                                    Ok(t.to_f32()[0])
+                                }
+                                Some(t) => Err(format!("{}: {attr} of shape {:?}", who(n), t.dims)),
+                                None => attr_float(n, attr, d),
+                            }
+                        };
+                        Unary::Clip(bound(1, "min", f32::MIN)?, bound(2, "max", f32::MAX)?)
+                    }
+                };
+                if self.fuse(n, f) {
+                    return Ok(());
+                }
+                let (x, shape) = self.buf(&self.need(n, 0)?)?;
+                let y = self.out(n, shape)?;
+                self.plan.steps.push(Step::Unary { x, y, f });
+                Ok(())
+            }
+            "Add" | "Sub" | "Mul" | "Div" => {
+                let op = match n.op_type.as_str() {
+                    "Add" => Binary::Add,
+                    "Sub" => Binary::Sub,
+                    "Mul" => Binary::Mul,
+                    _ => Binary::Div,
+                };
+                let (a, sa) = self.buf(&self.need(n, 0)?)?;
+                let (b, sb) = self.buf(&self.need(n, 1)?)?;
+                let (shape, bc) = Broadcast::new(&sa, &sb).ok_or_else(|| {
+                    format!("{}: shapes {sa:?} and {sb:?} do not broadcast", who(n))
+                })?;
+                let y = self.out(n, shape)?;
+                self.plan.steps.push(Step::Binary {
+                    a,
+                    b,
+                    y,
+                    op,
+                    bc,
+                    act: None,
+                });
+                Ok(())
+            }
+            "GlobalAveragePool" => {
+                let (x, s) = self.buf(&self.need(n, 0)?)?;
+                if s.len() < 3 {
+                    return Err(format!("{}: input of rank {}", who(n), s.len()));
+                }
+                let len = s[2..].iter().product::<usize>().max(1);
+                let mut shape = s[..2].to_vec();
+                shape.resize(s.len(), 1);
+                let y = self.out(n, shape)?;
+                self.plan.steps.push(Step::MeanPool { x, y, len });
+                Ok(())
+            }
+            "Reshape" | "Flatten" | "Identity" => self.reshape(n),
+            "Transpose" => {
+                let (x, shape) = self.buf(&self.need(n, 0)?)?;
+                let perm = match attr_ints(n, "perm")? {
+                    Some(p) => to_usize(&p, "perm")?,
+                    None => (0..shape.len()).rev().collect(),
+                };
+                let mut seen = vec![false; shape.len()];
+                for &p in &perm {
+                    if p >= shape.len() || std::mem::replace(&mut seen[p], true) {
+                        return Err(format!(
+                            "{}: perm {perm:?} for rank {}",
+                            who(n),
+                            shape.len()
+                        ));
+                    }
+                }
+                if perm.len() != shape.len() {
+                    return Err(format!(
+                        "{}: perm {perm:?} for rank {}",
+                        who(n),
+                        shape.len()
+                    ));
+                }
+                let out = perm.iter().map(|&p| shape[p]).collect();
+                let y = self.out(n, out)?;
+                self.plan.steps.push(Step::Transpose { x, y, shape, perm });
+                Ok(())
+            }
+            "MatMul" | "Gemm" => self.matmul(n),
+            "Constant" => {
+                let t = match n.attrs.get("value") {
+                    Some(Attr::Tensor(t)) => t.clone(),
+                    Some(Attr::Float(f)) => Tensor {
+                        dims: vec![],
+                        data: Data::F32(vec![*f]),
+                    },
+                    Some(Attr::Int(i)) => Tensor {
+                        dims: vec![],
+                        data: Data::I64(vec![*i]),
+                    },
+                    _ => return Err(format!("{}: only `value` constants are supported", who(n))),
+                };
+                let name = n.outputs.first().ok_or("Constant without output")?;
+                self.vals.insert(name.clone(), Val::Const(t));
+                Ok(())
+            }
+            op => Err(format!("{}: operator `{op}` is not supported", who(n))),
+        }
+    }
+
+    /// `Reshape`, `Flatten`, `Identity`: the same values under another shape (a buffer is
+    /// shared, a constant stays constant).
+    fn reshape(&mut self, n: &Node) -> Result<(), Error> {
+        let x = self.need(n, 0)?;
+        let shape_of = |v: &Val| match v {
+            Val::Const(t) => t.dims.clone(),
+            Val::Buf { shape, .. } => shape.clone(),
+        };
+        let old = shape_of(&x);
+        let count = Tensor::count(&old).ok_or("size overflow")?;
+        let new = match n.op_type.as_str() {
+            "Identity" => old.clone(),
+            "Flatten" => {
+                let axis = attr_int(n, "axis", 1)?;
+                let r = old.len() as i64;
+                let axis = if axis < 0 { axis + r } else { axis };
+                if !(0..=r).contains(&axis) {
+                    return Err(format!("{}: axis {axis} for rank {r}", who(n)));
+                }
+                let a = axis as usize;
+                vec![old[..a].iter().product(), old[a..].iter().product()]
+            }
+            _ => {
+                let spec = self
+                    .constant(n, 1, "shape")?
+                    .ok_or_else(|| format!("{}: no shape", who(n)))?;
+                let spec = spec
+                    .as_i64()
+                    .ok_or_else(|| format!("{}: shape is not int64", who(n)))?
+                    .to_vec();
+                let allow_zero = attr_int(n, "allowzero", 0)? != 0;
+                let mut out = Vec::with_capacity(spec.len());
+                let mut infer = None;
+                for (i, &d) in spec.iter().enumerate() {
+                    out.push(match d {
+                        -1 if infer.is_none() => {
+                            infer = Some(i);
+                            1
+                        }
+                        0 if !allow_zero => *old.get(i).ok_or_else(|| {
+                            format!("{}: shape {spec:?} copies a missing dimension", who(n))
+                        })?,
+                        d if d >= 0 => d as usize,
+                        _ => return Err(format!("{}: shape {spec:?}", who(n))),
+                    });
+                }
+                if let Some(i) = infer {
+                    let rest: usize = out.iter().product();
+                    if rest == 0 || count % rest != 0 {
+                        return Err(format!("{}: {old:?} cannot become {spec:?}", who(n)));
+                    }
+                    out[i] = count / rest;
+                }
+                out
+            }
+        };
+        if Tensor::count(&new) != Some(count) {
+            return Err(format!("{}: {old:?} cannot become {new:?}", who(n)));
+        }
+        let v = match x {
+            Val::Const(t) => Val::Const(Tensor {
+                dims: new,
+                data: t.data,
+            }),
+            Val::Buf { slot, .. } => Val::Buf { slot, shape: new },
+        };
+        let name = n.outputs.first().ok_or("no output")?;
+        self.vals.insert(name.clone(), v);
+        Ok(())
+    }
+
+    fn conv(&mut self, n: &Node) -> Result<(), Error> {
+        let (x, xs) = self.buf(&self.need(n, 0)?)?;
+        let w = self
+            .constant(n, 1, "kernel")?
+            .ok_or_else(|| format!("{}: no kernel", who(n)))?;
+        let bias = self.constant(n, 2, "bias")?;
+        let bad = |what: String| format!("{}: {what}", who(n));
+        if xs.len() != 4 || w.dims.len() != 4 {
+            return Err(bad(format!(
+                "input {xs:?} and kernel {:?}: only 2-D convolutions are supported",
+                w.dims
+            )));
+        }
+        let groups = usize::try_from(attr_int(n, "group", 1)?).map_err(|_| bad("group".into()))?;
+        let (batch, c, h, wd) = (xs[0], xs[1], xs[2], xs[3]);
+        let (m, cg, kh, kw) = (w.dims[0], w.dims[1], w.dims[2], w.dims[3]);
+        if groups == 0 || c % groups != 0 || m % groups != 0 || c / groups != cg {
+            return Err(bad(format!(
+                "{c} input channels, kernel {:?}, {groups} groups do not fit",
+                w.dims
+            )));
+        }
+        if let Some(k) = attr_ints(n, "kernel_shape")? {
+            if to_usize(&k, "kernel_shape")? != [kh, kw] {
+                return Err(bad(format!(
+                    "kernel_shape {k:?} against kernel {:?}",
+                    w.dims
+                )));
+            }
+        }
+        if let Some(d) = attr_ints(n, "dilations")? {
+            if d.iter().any(|&d| d != 1) {
+                return Err(bad(format!("dilations {d:?}: only 1 is supported")));
+            }
+        }
+        let strides = to_usize(&attr_ints(n, "strides")?.unwrap_or(vec![1, 1]), "strides")?;
+        if strides.len() != 2 || strides.contains(&0) {
+            return Err(bad(format!("strides {strides:?}")));
+        }
+        let (sh, sw) = (strides[0], strides[1]);
+        let auto = match n.attrs.get("auto_pad") {
+            Some(Attr::Str(s)) => s.clone(),
+            _ => "NOTSET".into(),
+        };
+        let (pt, pl, pb, pr) = match auto.as_str() {
+            "NOTSET" => {
+                let p = to_usize(&attr_ints(n, "pads")?.unwrap_or(vec![0; 4]), "pads")?;
+                if p.len() != 4 {
+                    return Err(bad(format!("pads {p:?}")));
+                }
+                (p[0], p[1], p[2], p[3])
+            }
+            "VALID" => (0, 0, 0, 0),
+            "SAME_UPPER" | "SAME_LOWER" => {
+                let total = |len: usize, k: usize, s: usize| {
+                    ((len.div_ceil(s) - 1) * s + k).saturating_sub(len)
+                };
+                let (th, tw) = (total(h, kh, sh), total(wd, kw, sw));
+                if auto == "SAME_UPPER" {
+                    (th / 2, tw / 2, th - th / 2, tw - tw / 2)
+                } else {
+                    (th - th / 2, tw - tw / 2, th / 2, tw / 2)
+                }
+            }
+            a => return Err(bad(format!("auto_pad {a}"))),
+        };
+        let out = |len: usize, k: usize, s: usize, a: usize, b: usize| {
+            let padded = len.checked_add(a)?.checked_add(b)?;
+            (len > 0 && padded >= k && k > 0).then(|| (padded - k) / s + 1)
+        };
+        let (oh, ow) = match (out(h, kh, sh, pt, pb), out(wd, kw, sw, pl, pr)) {
+            (Some(oh), Some(ow)) => (oh, ow),
+            _ => return Err(bad(format!("kernel {kh}×{kw} does not fit input {h}×{wd}"))),
+        };
+        let bias = match bias {
+            Some(b) if b.dims.iter().product::<usize>() == m => b.to_f32(),
+            Some(b) => return Err(bad(format!("bias of shape {:?} for {m} outputs", b.dims))),
+            None => vec![0.0; m],
+        };
+        let shape = ConvShape {
+            c,
+            h,
+            w: wd,
+            m,
+            oh,
+            ow,
+            kh,
+            kw,
+            sh,
+            sw,
+            pt,
+            pl,
+            groups,
+        };
+        let kind =
+            if groups == 1 && kh == 1 && kw == 1 && sh == 1 && sw == 1 && pt + pl + pb + pr == 0 {
+                ConvKind::Pointwise
+            } else if groups == c && m == c && cg == 1 {
+                match dwconv::Geometry::new(c, (h, wd), (kh, kw), (sh, sw), (pt, pb), (pl, pr)) {
+                    Some(g) if g.out_h == oh && g.out_w == ow => ConvKind::Depthwise(g),
+                    _ => ConvKind::General,
+                }
+            } else {
+                ConvKind::General
+            };
+        if matches!(kind, ConvKind::General) {
+            let col = Tensor::count(&[cg, kh, kw, oh, ow]).ok_or("size overflow")?;
+            self.total = self.total.saturating_add(col);
+            if self.total > MAX_PLAN_VALUES {
+                return Err(bad("im2col buffer beyond the plan's memory bound".into()));
+            }
+            self.plan.col_len = self.plan.col_len.max(col);
+        }
+        let y = self.out(n, vec![batch, m, oh, ow])?;
+        self.plan.steps.push(Step::Conv {
+            x,
+            y,
+            batch,
+            shape,
+            kind,
+            weights: w.to_f32(),
+            bias,
+            act: None,
+        });
+        Ok(())
+    }
+
+    /// `MatMul` (batched, equal batch dimensions or a 2-D right operand) and `Gemm`.
+    fn matmul(&mut self, n: &Node) -> Result<(), Error> {
+        let bad = |what: String| format!("{}: {what}", who(n));
+        let (a, sa) = self.buf(&self.need(n, 0)?)?;
+        let (b, sb) = self.buf(&self.need(n, 1)?)?;
+        let gemm = n.op_type == "Gemm";
+        if sa.len() < 2 || sb.len() < 2 || (gemm && (sa.len() != 2 || sb.len() != 2)) {
+            return Err(bad(format!("operands {sa:?} and {sb:?}")));
+        }
+        let (ta, tb) = if gemm {
+            (
+                attr_int(n, "transA", 0)? != 0,
+                attr_int(n, "transB", 0)? != 0,
+            )
+        } else {
+            (false, false)
+        };
+        let ra = sa.len();
+        let rb = sb.len();
+        let (ar, ac) = (sa[ra - 2], sa[ra - 1]);
+        let (br, bc) = (sb[rb - 2], sb[rb - 1]);
+        let (m, k) = if ta { (ac, ar) } else { (ar, ac) };
+        let (k2, nn) = if tb { (bc, br) } else { (br, bc) };
+        if k != k2 {
+            return Err(bad(format!("operands {sa:?} and {sb:?} do not multiply")));
+        }
+        let batch_a = &sa[..ra - 2];
+        let batch_b = &sb[..rb - 2];
+        let batch: usize = batch_a.iter().product();
+        let b_step = if batch_b.is_empty() || batch_b.iter().product::<usize>() == 1 {
+            0
+        } else if batch_b == batch_a {
+            br * bc
+        } else {
+            return Err(bad(format!("batch dimensions of {sa:?} and {sb:?}")));
+        };
+        let a_strides = if ta {
+            (1, ac, ar * ac)
+        } else {
+            (ac, 1, ar * ac)
+        };
+        let b_strides = if tb { (1, bc, b_step) } else { (bc, 1, b_step) };
+        let (alpha, bias) = if gemm {
+            let alpha = attr_float(n, "alpha", 1.0)?;
+            let beta = attr_float(n, "beta", 1.0)?;
+            let bias = match self.get(n, 2)? {
+                None => None,
+                Some(Val::Const(t)) => {
+                    let (shape, bcast) = Broadcast::new(&[m, nn], &t.dims)
+                        .filter(|(s, _)| *s == [m, nn])
+                        .ok_or_else(|| bad(format!("C of shape {:?} for [{m}, {nn}]", t.dims)))?;
+                    let zeros = vec![0.0; m * nn];
+                    let mut c = vec![0.0; m * nn];
+                    let scaled: Vec<f32> = t.to_f32().iter().map(|v| beta * v).collect();
+                    debug_assert_eq!(shape, [m, nn]);
+                    bcast.apply(Binary::Add, &zeros, &scaled, &mut c);
+                    Some(c)
+                }
+                Some(Val::Buf { .. }) => {
+                    return Err(bad("a computed C is not supported".into()));
+                }
+            };
+            (alpha, bias)
+        } else {
+            (1.0, None)
+        };
+        let mut shape = batch_a.to_vec();
+        shape.extend([m, nn]);
+        let y = self.out(n, shape)?;
+        self.plan.steps.push(Step::MatMul {
+            a,
+            b,
+            y,
+            batch,
+            mkn: (m, k, nn),
+            a_strides,
+            b_strides,
+            alpha,
+            bias,
+            act: None,
+        });
+        Ok(())
+    }
+}
+
+impl Plan {
+    /// Plans `model` for `inputs` (name and shape; every other graph input must be an
+    /// initialiser) and `outputs` (names), in that order.
+    ///
+    /// # Errors
+    /// An unknown input or output, a shape that contradicts the model's declaration, an
+    /// unsupported operator or attribute, shapes that do not fit, or tensors beyond
+    /// [`MAX_PLAN_VALUES`].
+    pub fn new(
+        model: &Model,
+        inputs: &[(&str, &[usize])],
+        outputs: &[&str],
+    ) -> Result<Self, Error> {
+        let mut b = Builder {
+            vals: HashMap::new(),
+            uses: HashMap::new(),
+            last_out: None,
+            plan: Plan {
+                steps: Vec::new(),
+                slots: Vec::new(),
+                init: Vec::new(),
+                inputs: Vec::new(),
+                outputs: Vec::new(),
+                col_len: 0,
+            },
+            total: 0,
+        };
+        for (name, t) in &model.initializers {
+            b.vals.insert(name.clone(), Val::Const(t.clone()));
+        }
+        for &(name, shape) in inputs {
+            let decl = model
+                .inputs
+                .iter()
+                .find(|i| i.name == name)
+                .ok_or_else(|| format!("the model has no input `{name}`"))?;
+            let fits = decl.dims.is_empty()
+                || (decl.dims.len() == shape.len()
+                    && decl
+                        .dims
+                        .iter()
+                        .zip(shape)
+                        .all(|(d, &s)| d.is_none_or(|d| d == s)));
+            if !fits || shape.contains(&0) {
+                return Err(format!(
+                    "input `{name}`: shape {shape:?} where the model declares {:?}",
+                    decl.dims
+                ));
+            }
+            let slot = b.slot(shape)?;
+            b.vals.insert(
+                name.to_string(),
+                Val::Buf {
+                    slot,
+                    shape: shape.to_vec(),
+                },
+            );
+            b.plan.inputs.push((name.to_string(), slot, shape.to_vec()));
+        }
+        // The nodes the outputs depend on (ONNX lists nodes in topological order).
+        let mut wanted: std::collections::HashSet<&str> = outputs.iter().copied().collect();
+        let mut keep = vec![false; model.nodes.len()];
+        for (i, n) in model.nodes.iter().enumerate().rev() {
+            if n.outputs.iter().any(|o| wanted.contains(o.as_str())) {
+                keep[i] = true;
+                wanted.extend(n.inputs.iter().map(String::as_str));
+            }
+        }
+        let kept = || {
+            model
+                .nodes
+                .iter()
+                .zip(&keep)
+                .filter(|(_, k)| **k)
+                .map(|(n, _)| n)
+        };
+        for name in kept()
+            .flat_map(|n| &n.inputs)
+            .map(String::as_str)
+            .chain(outputs.iter().copied())
+        {
+            *b.uses.entry(name.to_string()).or_default() += 1;
+        }
+        for n in kept() {
+            b.node(n)?;
+        }
+        for &name in outputs {
+            let v = b
+                .vals
+                .get(name)
+                .cloned()
+                .ok_or_else(|| format!("the model has no output `{name}`"))?;
+            let (slot, shape) = b.buf(&v)?;
+            b.plan.outputs.push((name.to_string(), slot, shape));
+        }
+        Ok(b.plan)
+    }
+
+    /// Shapes of the outputs, in the order asked for.
+    pub fn output_shapes(&self) -> Vec<&[usize]> {
+        self.outputs.iter().map(|(_, _, s)| s.as_slice()).collect()
+    }
+}
+
+/// The buffers of one plan and what runs it.
+#[derive(Debug)]
+pub struct Runner {
+    plan: std::sync::Arc<Plan>,
+    bufs: Vec<Vec<f32>>,
+    col: Vec<f32>,
+    dw: dwconv::Scratch,
+}
+
+impl Runner {
+    /// Buffers for `plan`, constants filled in.
+    pub fn new(plan: std::sync::Arc<Plan>) -> Self {
+        let mut bufs: Vec<Vec<f32>> = plan.slots.iter().map(|&n| vec![0.0; n]).collect();
+        for (slot, data) in &plan.init {
+            bufs[*slot].copy_from_slice(data);
+        }
+        let col = vec![0.0; plan.col_len];
+        Self {
+            plan,
+            bufs,
+            col,
+            dw: dwconv::Scratch::default(),
+        }
+    }
+
+    /// The plan this runner runs.
+    pub fn plan(&self) -> &Plan {
+        &self.plan
+    }
+
+    /// Runs the plan on `inputs` (in the plan's order, each of its shape's length) and
+    /// returns the outputs (in the order asked for at plan time).
+    ///
+    /// # Errors
+    /// A wrong number of inputs or a wrong length.
+    pub fn run(&mut self, inputs: &[&[f32]]) -> Result<Vec<&[f32]>, Error> {
+        let plan = std::sync::Arc::clone(&self.plan);
+        if inputs.len() != plan.inputs.len() {
+            return Err(format!(
+                "{} inputs; the plan has {}",
+                inputs.len(),
+                plan.inputs.len()
+            ));
+        }
+        for ((name, slot, shape), data) in plan.inputs.iter().zip(inputs) {
+            let buf = &mut self.bufs[*slot];
+            if buf.len() != data.len() {
+                return Err(format!(
+                    "input `{name}`: {} values for shape {shape:?}",
+                    data.len()
+                ));
+            }
+            buf.copy_from_slice(data);
+        }
+        for step in &plan.steps {
+            self.step(step);
+        }
+        Ok(plan
+            .outputs
+            .iter()
+            .map(|(_, slot, _)| self.bufs[*slot].as_slice())
+            .collect())
+    }
+
+    /// `bufs[x]` to read and `bufs[y]` to write (`x ≠ y`: every step writes a new buffer).
+    fn pair(bufs: &mut [Vec<f32>], x: usize, y: usize) -> (&[f32], &mut [f32]) {
+        if x < y {
+            let (lo, hi) = bufs.split_at_mut(y);
+            (&lo[x], &mut hi[0])
+        } else {
+            let (lo, hi) = bufs.split_at_mut(x);
+            (&hi[0], &mut lo[y])
+        }
+    }
+
+    fn step(&mut self, step: &Step) {
+        match step {
+            Step::Conv {
+                x,
+                y,
+                batch,
+                shape: s,
+                kind,
+                weights,
+                bias,
+                act,
+            } => {
+                let (xb, yb) = Self::pair(&mut self.bufs, *x, *y);
+                let (in_len, out_len) = (s.c * s.h * s.w, s.m * s.oh * s.ow);
+                let plane = s.oh * s.ow;
+                for i in 0..*batch {
+                    let xi = &xb[i * in_len..(i + 1) * in_len];
+                    let yi = &mut yb[i * out_len..(i + 1) * out_len];
+                    match kind {
+                        ConvKind::Depthwise(g) => {
+                            let ok = dwconv::depthwise(g, xi, weights, bias, yi, &mut self.dw);
+                            debug_assert!(ok, "depthwise geometry checked at plan time");
+                        }
+                        ConvKind::Pointwise => {
+                            ops::fill_bias(yi, bias, plane);
+                            ops::gemm(
+                                (s.m, s.c, plane),
+                                weights,
+                                (s.c, 1),
+                                xi,
+                                (plane, 1),
+                                (1.0, 1.0),
+                                yi,
+                            );
+                        }
+                        ConvKind::General => {
+                            let (cg, mg) = (s.c / s.groups, s.m / s.groups);
+                            let kk = cg * s.kh * s.kw;
+                            let col = &mut self.col[..kk * plane];
+                            ops::fill_bias(yi, bias, plane);
+                            for g in 0..s.groups {
+                                let xg = &xi[g * cg * s.h * s.w..(g + 1) * cg * s.h * s.w];
+                                ops::im2col(s, cg, xg, col);
+                                let wg = &weights[g * mg * kk..(g + 1) * mg * kk];
+                                let yg = &mut yi[g * mg * plane..(g + 1) * mg * plane];
+                                ops::gemm(
+                                    (mg, kk, plane),
+                                    wg,
+                                    (kk, 1),
+                                    col,
+                                    (plane, 1),
+                                    (1.0, 1.0),
+                                    yg,
+                                );
+                            }
+                        }
+                    }
+                    if let Some(f) = act {
+                        ops::unary_in_place(*f, yi);
+                    }
+                }
+            }
+            Step::Unary { x, y, f } => {
+                let (xb, yb) = Self::pair(&mut self.bufs, *x, *y);
+                ops::unary(*f, xb, yb);
+            }
+            Step::Binary {
+                a,
+                b,
+                y,
+                op,
+                bc,
+                act,
+            } => {
+                // Take the output out so that both operands can be borrowed (they may be
+                // the same buffer).
+                let mut out = std::mem::take(&mut self.bufs[*y]);
+                bc.apply(*op, &self.bufs[*a], &self.bufs[*b], &mut out);
+                if let Some(f) = act {
+                    ops::unary_in_place(*f, &mut out);
+                }
+                self.bufs[*y] = out;
+            }
+            Step::MatMul {
+                a,
+                b,
+                y,
+                batch,
+                mkn: (m, k, n),
+                a_strides: (ar, ac, ab),
+                b_strides: (br, bc, bb),
+                alpha,
+                bias,
+                act,
+            } => {
+                let mut out = std::mem::take(&mut self.bufs[*y]);
+                let (av, bv) = (&self.bufs[*a], &self.bufs[*b]);
+                for i in 0..*batch {
+                    let yi = &mut out[i * m * n..(i + 1) * m * n];
+                    let beta = match bias {
+                        Some(c) => {
+                            yi.copy_from_slice(c);
+                            1.0
+                        }
+                        None => 0.0,
+                    };
+                    let ai = &av[i * ab..];
+                    let bi = &bv[i * bb..];
+                    ops::gemm(
+                        (*m, *k, *n),
+                        ai,
+                        (*ar, *ac),
+                        bi,
+                        (*br, *bc),
+                        (*alpha, beta),
+                        yi,
+                    );
+                }
+                if let Some(f) = act {
+                    ops::unary_in_place(*f, &mut out);
+                }
+                self.bufs[*y] = out;
+            }
+            Step::MeanPool { x, y, len } => {
+                let (xb, yb) = Self::pair(&mut self.bufs, *x, *y);
+                ops::mean_pool(xb, *len, yb);
+            }
+            Step::Transpose { x, y, shape, perm } => {
+                let (xb, yb) = Self::pair(&mut self.bufs, *x, *y);
+                ops::transpose(xb, shape, perm, yb);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ints(v: &[i64]) -> Attr {
+        Attr::Ints(v.to_vec())
+    }
+
+    fn f32s(dims: &[usize], seed: u32) -> Tensor {
+        let n = dims.iter().product::<usize>();
+        let mut s = seed.wrapping_mul(2_654_435_761).max(1);
+        let data = (0..n)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 17;
+                s ^= s << 5;
+                (s % 2001) as f32 / 1000.0 - 1.0
+            })
+            .collect();
+        Tensor {
+            dims: dims.to_vec(),
+            data: Data::F32(data),
+        }
+    }
+
+    fn node(op: &str, inputs: &[&str], output: &str, attrs: &[(&str, Attr)]) -> Node {
+        Node {
+            name: output.to_string(),
+            op_type: op.to_string(),
+            domain: String::new(),
+            inputs: inputs.iter().map(|s| s.to_string()).collect(),
+            outputs: vec![output.to_string()],
+            attrs: attrs
+                .iter()
+                .map(|(k, v)| (k.to_string(), v.clone()))
+                .collect(),
+        }
+    }
+
+    fn model(nodes: Vec<Node>, inits: Vec<(&str, Tensor)>, inputs: &[&str]) -> Model {
+        Model {
+            nodes,
+            initializers: inits.into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
+            inputs: inputs
+                .iter()
+                .map(|n| onnx::ValueInfo {
+                    name: n.to_string(),
+                    dims: vec![],
+                })
+                .collect(),
+            outputs: vec![],
+            opset: 14,
+        }
+    }
+
+    fn run(m: &Model, inputs: &[(&str, &[usize], &[f32])], out: &str) -> Vec<f32> {
+        let io: Vec<(&str, &[usize])> = inputs.iter().map(|(n, s, _)| (*n, *s)).collect();
+        let plan = Plan::new(m, &io, &[out]).unwrap();
+        let mut r = Runner::new(std::sync::Arc::new(plan));
+        let data: Vec<&[f32]> = inputs.iter().map(|(_, _, d)| *d).collect();
+        r.run(&data).unwrap()[0].to_vec()
+    }
+
+    /// Direct convolution, f64 sums, zero padding.
+    #[allow(clippy::too_many_arguments)]
+    fn naive_conv(
+        x: &[f32],
+        (_, h, w): (usize, usize, usize),
+        k: &Tensor,
+        bias: &[f32],
+        groups: usize,
+        (sh, sw): (usize, usize),
+        (pt, pl, pb, pr): (usize, usize, usize, usize),
+    ) -> Vec<f32> {
+        let kw_ = k.to_f32();
+        let (m, cg, kh, kw) = (k.dims[0], k.dims[1], k.dims[2], k.dims[3]);
+        let oh = (h + pt + pb - kh) / sh + 1;
+        let ow = (w + pl + pr - kw) / sw + 1;
+        let mg = m / groups;
+        let mut y = vec![0.0; m * oh * ow];
+        for o in 0..m {
+            let g = o / mg;
+            for oy in 0..oh {
+                for ox in 0..ow {
+                    let mut s = f64::from(bias[o]);
+                    for ci in 0..cg {
+                        let cin = g * cg + ci;
+                        for ky in 0..kh {
+                            for kx in 0..kw {
+                                let yy = (oy * sh + ky) as isize - pt as isize;
+                                let xx = (ox * sw + kx) as isize - pl as isize;
+                                if yy < 0 || xx < 0 || yy >= h as isize || xx >= w as isize {
+                                    continue;
+                                }
+                                let v = x[(cin * h + yy as usize) * w + xx as usize];
+                                let wv = kw_[((o * cg + ci) * kh + ky) * kw + kx];
+                                s += f64::from(v) * f64::from(wv);
+                            }
+                        }
+                    }
+                    y[(o * oh + oy) * ow + ox] = s as f32;
+                }
+            }
+        }
+        y
+    }
+
+    fn worst(a: &[f32], b: &[f32]) -> f32 {
+        assert_eq!(a.len(), b.len());
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f32::max)
+    }
+
+    /// Each convolution path (pointwise matrix product, depthwise kernel, im2col for dense
+    /// and grouped kernels, with strides and asymmetric padding) against a direct f64 sum.
+    #[test]
+    fn convolutions_match_a_direct_sum_on_every_path() {
+        // (c, h, w, m, groups, kh, kw, strides, pads [t, l, b, r])
+        #[allow(clippy::type_complexity)] // one row per case, read as a table
+        let cases: &[(
+            usize,
+            usize,
+            usize,
+            usize,
+            usize,
+            usize,
+            usize,
+            [i64; 2],
+            [i64; 4],
+        )] = &[
+            (5, 7, 9, 6, 1, 1, 1, [1, 1], [0, 0, 0, 0]),
+            (6, 9, 8, 6, 6, 3, 3, [2, 2], [1, 1, 1, 1]),
+            (4, 11, 10, 4, 4, 5, 5, [1, 1], [2, 2, 2, 2]),
+            (3, 13, 12, 8, 1, 3, 3, [2, 2], [1, 1, 1, 1]),
+            (4, 7, 9, 6, 2, 3, 2, [1, 2], [0, 1, 2, 0]),
+            (3, 6, 6, 4, 1, 1, 1, [2, 1], [1, 0, 0, 1]),
+        ];
+        for (i, &(c, h, w, m, groups, kh, kw, strides, pads)) in cases.iter().enumerate() {
+            let k = f32s(&[m, c / groups, kh, kw], i as u32 + 1);
+            let b = f32s(&[m], i as u32 + 50);
+            let x = f32s(&[1, c, h, w], i as u32 + 99).to_f32();
+            let mdl = model(
+                vec![node(
+                    "Conv",
+                    &["x", "k", "b"],
+                    "y",
+                    &[
+                        ("group", Attr::Int(groups as i64)),
+                        ("strides", ints(&strides)),
+                        ("pads", ints(&pads)),
+                        ("kernel_shape", ints(&[kh as i64, kw as i64])),
+                    ],
+                )],
+                vec![("k", k.clone()), ("b", b.clone())],
+                &["x"],
+            );
+            let got = run(&mdl, &[("x", &[1, c, h, w], &x)], "y");
+            let p = |j: usize| pads[j] as usize;
+            let want = naive_conv(
+                &x,
+                (c, h, w),
+                &k,
+                &b.to_f32(),
+                groups,
+                (strides[0] as usize, strides[1] as usize),
+                (p(0), p(1), p(2), p(3)),
+            );
+            let d = worst(&got, &want);
+            assert!(d < 1e-5, "case {i}: {d}");
+        }
+    }
+
+    /// Gemm (transB, α, β, a broadcast C), batched MatMul after a Transpose, broadcast Mul
+    /// and Add, a Reshape with 0 and −1, the pooling and the activations, against direct
+    /// formulas.
+    #[test]
+    fn the_other_operators_match_their_formulas() {
+        let x = f32s(&[2, 3, 4], 7).to_f32();
+        let wt = f32s(&[5, 4], 8);
+        let cb = f32s(&[5], 9);
+        let mdl = model(
+            vec![
+                node("Reshape", &["x", "s"], "x2", &[]),
+                node(
+                    "Gemm",
+                    &["x2", "w", "c"],
+                    "g",
+                    &[
+                        ("transB", Attr::Int(1)),
+                        ("alpha", Attr::Float(0.5)),
+                        ("beta", Attr::Float(2.0)),
+                    ],
+                ),
+                node("HardSwish", &["g"], "h", &[]),
+            ],
+            vec![
+                ("w", wt.clone()),
+                ("c", cb.clone()),
+                (
+                    "s",
+                    Tensor {
+                        dims: vec![2],
+                        data: Data::I64(vec![-1, 4]),
+                    },
+                ),
+            ],
+            &["x"],
+        );
+        let got = run(&mdl, &[("x", &[2, 3, 4], &x)], "h");
+        let (w, c) = (wt.to_f32(), cb.to_f32());
+        let mut want = Vec::new();
+        for r in 0..6 {
+            for o in 0..5 {
+                let dot: f32 = (0..4).map(|k| x[r * 4 + k] * w[o * 4 + k]).sum();
+                let g = 0.5 * dot + 2.0 * c[o];
+                want.push(g * (g / 6.0 + 0.5).clamp(0.0, 1.0));
+            }
+        }
+        assert!(worst(&got, &want) < 1e-5);
+
+        // [2,3,4] → Transpose(0,2,1) [2,4,3] · [2,3,4] → [2,4,4]; × a [4,1] column; pooled.
+        let y = f32s(&[2, 3, 4], 11).to_f32();
+        let col = f32s(&[4, 1], 12);
+        let mdl = model(
+            vec![
+                node("Transpose", &["x"], "xt", &[("perm", ints(&[0, 2, 1]))]),
+                node("MatMul", &["xt", "y"], "p", &[]),
+                node("Mul", &["p", "col"], "q", &[]),
+                node("Reshape", &["q", "s"], "q4", &[]),
+                node("GlobalAveragePool", &["q4"], "avg", &[]),
+                node("Sigmoid", &["avg"], "sg", &[]),
+                node("Add", &["sg", "q4"], "out", &[]),
+            ],
+            vec![
+                ("col", col.clone()),
+                (
+                    "s",
+                    Tensor {
+                        dims: vec![4],
+                        data: Data::I64(vec![0, 0, 2, 2]),
+                    },
+                ),
+            ],
+            &["x", "y"],
+        );
+        let got = run(&mdl, &[("x", &[2, 3, 4], &x), ("y", &[2, 3, 4], &y)], "out");
+        let colv = col.to_f32();
+        let mut q = [0.0f32; 2 * 4 * 4];
+        for bt in 0..2 {
+            for i in 0..4 {
+                for j in 0..4 {
+                    let s: f32 = (0..3)
+                        .map(|k| x[bt * 12 + k * 4 + i] * y[bt * 12 + k * 4 + j])
+                        .sum();
+                    q[(bt * 4 + i) * 4 + j] = s * colv[i];
+                }
+            }
+        }
+        let mut want = Vec::new();
+        for ch in 0..8 {
+            let avg = q[ch * 4..ch * 4 + 4].iter().sum::<f32>() / 4.0;
+            let sg = 1.0 / (1.0 + (-avg).exp());
+            want.extend(q[ch * 4..ch * 4 + 4].iter().map(|v| sg + v));
+        }
+        assert!(worst(&got, &want) < 1e-5, "{}", worst(&got, &want));
+    }
+
+    /// An activation is fused into the step that wrote its input only when nothing else
+    /// reads that value: `relu(conv) + conv` keeps the convolution's own values for the sum,
+    /// and `relu(conv)` alone equals the formula (fused).
+    #[test]
+    fn activations_fuse_only_into_values_read_once() {
+        let k = f32s(&[3, 2, 1, 1], 3);
+        let x = f32s(&[1, 2, 4, 4], 4).to_f32();
+        let conv = || node("Conv", &["x", "k"], "c", &[]);
+        let m = model(
+            vec![
+                conv(),
+                node("Relu", &["c"], "r", &[]),
+                node("Add", &["r", "c"], "y", &[]),
+            ],
+            vec![("k", k.clone())],
+            &["x"],
+        );
+        let p = Plan::new(&m, &[("x", &[1, 2, 4, 4])], &["y"]).unwrap();
+        assert_eq!(
+            p.steps.len(),
+            3,
+            "not fused: the sum reads the convolution too"
+        );
+        let got = run(&m, &[("x", &[1, 2, 4, 4], &x)], "y");
+        let c = naive_conv(&x, (2, 4, 4), &k, &[0.0; 3], 1, (1, 1), (0, 0, 0, 0));
+        let want: Vec<f32> = c.iter().map(|v| v.max(0.0) + v).collect();
+        assert!(worst(&got, &want) < 1e-5);
+        let m = model(
+            vec![conv(), node("Relu", &["c"], "y", &[])],
+            vec![("k", k)],
+            &["x"],
+        );
+        let p = Plan::new(&m, &[("x", &[1, 2, 4, 4])], &["y"]).unwrap();
+        assert_eq!(p.steps.len(), 1, "fused");
+        let got = run(&m, &[("x", &[1, 2, 4, 4], &x)], "y");
+        let want: Vec<f32> = c.iter().map(|v| v.max(0.0)).collect();
+        assert!(worst(&got, &want) < 1e-5);
+    }
+
+    /// Unsupported operators, missing inputs, shapes that do not fit and sizes beyond the
+    /// memory bound are errors at plan time, naming the node.
+    #[test]
+    fn bad_graphs_are_errors_at_plan_time() {
+        let plan = |m: &Model, shape: &[usize]| Plan::new(m, &[("x", shape)], &["y"]);
+        let m = model(vec![node("LSTM", &["x"], "y", &[])], vec![], &["x"]);
+        let e = plan(&m, &[1, 4]).unwrap_err();
+        assert!(e.contains("`LSTM` is not supported"), "{e}");
+        let m = model(vec![node("Relu", &["z"], "y", &[])], vec![], &["x"]);
+        assert!(plan(&m, &[1, 4])
+            .unwrap_err()
+            .contains("`z` is not defined"));
+        let m = model(
+            vec![node("Add", &["x", "k"], "y", &[])],
+            vec![("k", f32s(&[3], 1))],
+            &["x"],
+        );
+        assert!(plan(&m, &[1, 4]).unwrap_err().contains("do not broadcast"));
+        let k = f32s(&[4, 2, 3, 3], 1);
+        let conv = node("Conv", &["x", "k"], "y", &[]);
+        let m = model(vec![conv.clone()], vec![("k", k.clone())], &["x"]);
+        assert!(plan(&m, &[1, 3, 8, 8]).unwrap_err().contains("do not fit"));
+        assert!(plan(&m, &[1, 2, 2, 2])
+            .unwrap_err()
+            .contains("does not fit"));
+        // A 4-channel 100k × 100k input: 4e10 values, refused before any allocation.
+        let m = model(vec![conv], vec![("k", f32s(&[4, 4, 3, 3], 1))], &["x"]);
+        let e = plan(&m, &[1, 4, 100_000, 100_000]).unwrap_err();
+        assert!(e.contains("memory"), "{e}");
+        assert!(Plan::new(&m, &[("nope", &[1])], &["y"]).is_err());
+        assert!(Plan::new(&m, &[("x", &[1, 4, 8, 8])], &["missing"]).is_err());
+        // The wrong input length at run time is an error, not a panic.
+        let p = Plan::new(&m, &[("x", &[1, 4, 8, 8])], &["y"]).unwrap();
+        let mut r = Runner::new(std::sync::Arc::new(p));
+        assert!(r.run(&[&[0.0; 7]]).is_err());
+        assert!(r.run(&[]).is_err());
+    }
+}
