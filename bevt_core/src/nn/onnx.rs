@@ -524,16 +524,17 @@ mod tests {
         );
     }
 
-    /// Every prefix of a model and every single-byte corruption of its first kilobytes is
-    /// an error or a model, never a panic or an allocation beyond the input.
+    /// Prefixes of a model (every 997th length) and single-byte corruptions of its first 512
+    /// bytes (where the graph's structure is) are errors or models, never panics or
+    /// allocations beyond the input.
     #[test]
     fn truncated_and_corrupted_files_are_errors_not_panics() {
-        for len in (0..HEAD.len()).step_by(97) {
+        for len in (0..HEAD.len()).step_by(997) {
             let _ = parse(&HEAD[..len]);
         }
         assert!(parse(&HEAD[..HEAD.len() / 2]).is_err());
         let mut buf = HEAD.to_vec();
-        for i in 0..2048 {
+        for i in 0..512 {
             let old = buf[i];
             for x in [0x00, 0xff, 0x80, 0x0a] {
                 buf[i] = x;
