@@ -296,7 +296,10 @@ impl Builder {
                                 None => attr_float(n, attr, d),
                             }
                         };
-                        Unary::Clip(bound(1, "min", f32::MIN)?, bound(2, "max", f32::MAX)?)
+                        Unary::Clip(
+                            bound(1, "min", f32::NEG_INFINITY)?,
+                            bound(2, "max", f32::INFINITY)?,
+                        )
                     }
                 };
                 if self.fuse(n, f) {
