@@ -174,6 +174,9 @@ struct Builder {
 impl Builder {
     fn slot(&mut self, shape: &[usize]) -> Result<usize, Error> {
         let n = Tensor::count(shape).ok_or("a tensor size overflows")?;
+        if n == 0 {
+            return Err(format!("a tensor of shape {shape:?} holds no value"));
+        }
         self.total = self.total.saturating_add(n);
         if self.total > MAX_PLAN_VALUES {
             return Err(format!(
@@ -537,6 +540,15 @@ impl Builder {
             let padded = len.checked_add(a)?.checked_add(b)?;
             (len > 0 && padded >= k && k > 0).then(|| (padded - k) / s + 1)
         };
+        // Padding wider than the kernel reads only zeros, and a stride beyond the padded input
+        // yields one output: both are refused, which keeps every index arithmetic small.
+        if pt.max(pb) > kh || pl.max(pr) > kw || sh > h + pt + pb || sw > wd + pl + pr {
+            return Err(bad(format!(
+                "pads {:?} for a {kh}×{kw} kernel or strides {strides:?} for a {h}×{wd} input: \
+                 padding at most the kernel and strides at most the padded input are supported",
+                [pt, pl, pb, pr]
+            )));
+        }
         let (oh, ow) = match (out(h, kh, sh, pt, pb), out(wd, kw, sw, pl, pr)) {
             (Some(oh), Some(ow)) => (oh, ow),
             _ => return Err(bad(format!("kernel {kh}×{kw} does not fit input {h}×{wd}"))),
@@ -617,7 +629,7 @@ impl Builder {
         let (br, bc) = (sb[rb - 2], sb[rb - 1]);
         let (m, k) = if ta { (ac, ar) } else { (ar, ac) };
         let (k2, nn) = if tb { (bc, br) } else { (br, bc) };
-        if k != k2 {
+        if k != k2 || m == 0 || nn == 0 {
             return Err(bad(format!("operands {sa:?} and {sb:?} do not multiply")));
         }
         let batch_a = &sa[..ra - 2];
@@ -778,8 +790,8 @@ impl Plan {
     }
 
     /// Shapes of the outputs, in the order asked for.
-    pub fn output_shapes(&self) -> Vec<&[usize]> {
-        self.outputs.iter().map(|(_, _, s)| s.as_slice()).collect()
+    pub fn output_shapes(&self) -> impl ExactSizeIterator<Item = &[usize]> {
+        self.outputs.iter().map(|(_, _, s)| s.as_slice())
     }
 }
 
@@ -1326,6 +1338,30 @@ mod tests {
         assert!(plan(&m, &[1, 2, 2, 2])
             .unwrap_err()
             .contains("does not fit"));
+        // Padding beyond the kernel, a stride beyond the input, an empty kernel.
+        let padded = node("Conv", &["x", "k"], "y", &[("pads", ints(&[4, 0, 0, 0]))]);
+        let m = model(vec![padded], vec![("k", f32s(&[4, 4, 3, 3], 1))], &["x"]);
+        assert!(plan(&m, &[1, 4, 8, 8])
+            .unwrap_err()
+            .contains("at most the kernel"));
+        let strided = node(
+            "Conv",
+            &["x", "k"],
+            "y",
+            &[("strides", ints(&[1 << 62, 1]))],
+        );
+        let m = model(vec![strided], vec![("k", f32s(&[4, 4, 3, 3], 1))], &["x"]);
+        assert!(plan(&m, &[1, 4, 8, 8])
+            .unwrap_err()
+            .contains("at most the padded input"));
+        let m = model(
+            vec![conv.clone()],
+            vec![("k", f32s(&[0, 4, 3, 3], 1))],
+            &["x"],
+        );
+        assert!(plan(&m, &[1, 4, 8, 8])
+            .unwrap_err()
+            .contains("holds no value"));
         // A 4-channel 100k × 100k input: 4e10 values, refused before any allocation.
         let m = model(vec![conv], vec![("k", f32s(&[4, 4, 3, 3], 1))], &["x"]);
         let e = plan(&m, &[1, 4, 100_000, 100_000]).unwrap_err();

@@ -225,37 +225,34 @@ impl Net {
         inputs: &[(&[usize], &[f32])],
         expected: &[(&'static str, &[usize])],
     ) -> Result<Vec<Vec<f32>>, NanoError> {
-        let shapes: Vec<Vec<usize>> = self
-            .runner
-            .plan()
-            .output_shapes()
-            .iter()
-            .map(|s| s.to_vec())
-            .collect();
+        // The shapes are the plan's: checked before the run, without copying them.
+        let shapes = self.runner.plan().output_shapes();
+        if shapes.len() != expected.len() {
+            return Err(NanoError::Run {
+                key: self.key,
+                path: self.path.clone(),
+                reason: format!("{} outputs; expected {}", shapes.len(), expected.len()),
+            });
+        }
+        for (shape, &(name, want)) in shapes.zip(expected) {
+            if shape != want {
+                return Err(NanoError::Shape {
+                    key: self.key,
+                    path: self.path.clone(),
+                    name,
+                    shape: shape.to_vec(),
+                    expected: want.to_vec(),
+                });
+            }
+        }
         let data: Vec<&[f32]> = inputs.iter().map(|(_, d)| *d).collect();
         let outputs = self.runner.run(&data).map_err(|reason| NanoError::Run {
             key: self.key,
             path: self.path.clone(),
             reason,
         })?;
-        if outputs.len() != expected.len() {
-            return Err(NanoError::Run {
-                key: self.key,
-                path: self.path.clone(),
-                reason: format!("{} outputs; expected {}", outputs.len(), expected.len()),
-            });
-        }
         let mut out = Vec::with_capacity(expected.len());
-        for ((value, shape), &(name, want)) in outputs.iter().zip(&shapes).zip(expected) {
-            if shape.as_slice() != want {
-                return Err(NanoError::Shape {
-                    key: self.key,
-                    path: self.path.clone(),
-                    name,
-                    shape: shape.clone(),
-                    expected: want.to_vec(),
-                });
-            }
+        for (value, &(name, _)) in outputs.iter().zip(expected) {
             if value.iter().any(|v| !v.is_finite()) {
                 return Err(NanoError::NonFinite {
                     key: self.key,
