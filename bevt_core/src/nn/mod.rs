@@ -4,8 +4,10 @@
 //! for, into a list of steps over buffers sized once; a [`Runner`] owns the buffers and
 //! runs the steps. Single-threaded and allocation-free per run.
 //!
-//! Operators: `Conv` (any groups; 1 × 1 as a matrix product, depthwise through
-//! [`crate::redetect::dwconv`], the rest through im2col and a matrix product), `Gemm`,
+//! Operators: `Conv` (any groups; one group, 1 × 1 or not, through our own blocked product
+//! `ops::rows_product` with the bias and activation applied as it stores, depthwise
+//! through [`crate::redetect::dwconv`], other groupings through im2col and a matrix
+//! product), `Gemm`,
 //! `MatMul`, `Relu`, `Sigmoid`, `Exp`, `HardSigmoid`, `HardSwish`, `Clip`, `Add`, `Sub`,
 //! `Mul`, `Div` (numpy broadcasting), `GlobalAveragePool`, `Reshape`, `Flatten`,
 //! `Transpose`, `Identity`, `Constant`. Another operator, a computed convolution kernel or a
@@ -39,11 +41,15 @@ enum Val {
 /// How a convolution is computed.
 #[derive(Debug, Clone)]
 enum ConvKind {
-    /// 1 × 1, stride 1, no padding, one group: a matrix product.
+    /// 1 × 1, stride 1, no padding, one group: a matrix product of the weights (packed by
+    /// [`ops::pack_rows`]) and the input planes.
     Pointwise,
     /// One group per channel, one output per group.
     Depthwise(dwconv::Geometry),
-    /// im2col then a matrix product, per group.
+    /// One group, any kernel: per output row, im2col of that row then a matrix product
+    /// with the weights packed by [`ops::pack_rows`].
+    Rows,
+    /// Several groups: im2col then a matrix product, per group.
     General,
 }
 
@@ -576,6 +582,8 @@ impl Builder {
         let kind =
             if groups == 1 && kh == 1 && kw == 1 && sh == 1 && sw == 1 && pt + pl + pb + pr == 0 {
                 ConvKind::Pointwise
+            } else if groups == 1 {
+                ConvKind::Rows
             } else if groups == c && m == c && cg == 1 {
                 match dwconv::Geometry::new(c, (h, wd), (kh, kw), (sh, sw), (pt, pb), (pl, pr)) {
                     Some(g) if g.out_h == oh && g.out_w == ow => ConvKind::Depthwise(g),
@@ -584,8 +592,14 @@ impl Builder {
             } else {
                 ConvKind::General
             };
-        if matches!(kind, ConvKind::General) {
-            let col = Tensor::count(&[cg, kh, kw, oh, ow]).ok_or("size overflow")?;
+        let col = match kind {
+            ConvKind::General => Some(Tensor::count(&[cg, kh, kw, oh, ow])),
+            ConvKind::Rows => Some(Tensor::count(&[cg, kh, kw, ow])),
+            ConvKind::Pointwise => Some(Tensor::count(&[c, ops::tile_cols(c)])),
+            _ => None,
+        };
+        if let Some(col) = col {
+            let col = col.ok_or("size overflow")?;
             self.total = self.total.saturating_add(col);
             if self.total > MAX_PLAN_VALUES {
                 return Err(bad("im2col buffer beyond the plan's memory bound".into()));
@@ -593,13 +607,17 @@ impl Builder {
             self.plan.col_len = self.plan.col_len.max(col);
         }
         let y = self.out(n, vec![batch, m, oh, ow])?;
+        let weights = match kind {
+            ConvKind::Pointwise | ConvKind::Rows => ops::pack_rows(&w.to_f32(), m, cg * kh * kw),
+            _ => w.to_f32(),
+        };
         self.plan.steps.push(Step::Conv {
             x,
             y,
             batch,
             shape,
             kind,
-            weights: w.to_f32(),
+            weights,
             bias,
             act: None,
         });
@@ -894,16 +912,28 @@ impl Runner {
                             debug_assert!(ok, "depthwise geometry checked at plan time");
                         }
                         ConvKind::Pointwise => {
-                            ops::fill_bias(yi, bias, plane);
-                            ops::gemm(
-                                (s.m, s.c, plane),
-                                weights,
-                                (s.c, 1),
-                                xi,
-                                (plane, 1),
-                                (1.0, 1.0),
-                                yi,
-                            );
+                            let (mkn, col) = ((s.m, s.c, plane), &mut self.col);
+                            ops::pointwise(mkn, weights, xi, bias, *act, yi, col);
+                            continue; // the activation is applied
+                        }
+                        ConvKind::Rows => {
+                            let k = s.c * s.kh * s.kw;
+                            let col = &mut self.col[..k * s.ow];
+                            for oy in 0..s.oh {
+                                ops::im2col_row(s, xi, oy, col);
+                                let yo = &mut yi[oy * s.ow..];
+                                ops::rows_product(
+                                    (s.m, k, s.ow),
+                                    weights,
+                                    col,
+                                    s.ow,
+                                    bias,
+                                    *act,
+                                    yo,
+                                    plane,
+                                );
+                            }
+                            continue; // the activation is applied
                         }
                         ConvKind::General => {
                             let (cg, mg) = (s.c / s.groups, s.m / s.groups);
@@ -1143,6 +1173,9 @@ mod tests {
             (3, 13, 12, 8, 1, 3, 3, [2, 2], [1, 1, 1, 1]),
             (4, 7, 9, 6, 2, 3, 2, [1, 2], [0, 1, 2, 0]),
             (3, 6, 6, 4, 1, 1, 1, [2, 1], [1, 0, 0, 1]),
+            // Several blocks of output channels and columns, with a partial one of each.
+            (17, 9, 10, 20, 1, 1, 1, [1, 1], [0, 0, 0, 0]),
+            (3, 20, 35, 19, 1, 3, 3, [2, 2], [1, 1, 1, 1]),
         ];
         for (i, &(c, h, w, m, groups, kh, kw, strides, pads)) in cases.iter().enumerate() {
             let k = f32s(&[m, c / groups, kh, kw], i as u32 + 1);
@@ -1277,6 +1310,40 @@ mod tests {
     /// An activation is fused into the step that wrote its input only when nothing else
     /// reads that value: `relu(conv) + conv` keeps the convolution's own values for the sum,
     /// and `relu(conv)` alone equals the formula (fused).
+    #[test]
+    fn a_convolution_by_rows_applies_its_fused_activation() {
+        let (c, h, w, m) = (3, 19, 37, 11);
+        let k = f32s(&[m, c, 3, 3], 7);
+        let b = f32s(&[m], 8);
+        let x = f32s(&[1, c, h, w], 9).to_f32();
+        let attrs = [("strides", ints(&[2, 2])), ("pads", ints(&[1, 1, 1, 1]))];
+        let mdl = model(
+            vec![
+                node("Conv", &["x", "k", "b"], "c", &attrs),
+                node("HardSwish", &["c"], "y", &[]),
+            ],
+            vec![("k", k.clone()), ("b", b.clone())],
+            &["x"],
+        );
+        let p = Plan::new(&mdl, &[("x", &[1, c, h, w])], &["y"]).unwrap();
+        assert_eq!(p.steps.len(), 1, "fused");
+        assert!(matches!(
+            p.steps[0],
+            Step::Conv {
+                kind: ConvKind::Rows,
+                ..
+            }
+        ));
+        let got = run(&mdl, &[("x", &[1, c, h, w], &x)], "y");
+        let conv = naive_conv(&x, (c, h, w), &k, &b.to_f32(), 1, (2, 2), (1, 1, 1, 1));
+        let want: Vec<f32> = conv
+            .iter()
+            .map(|&v| v * (v / 6.0 + 0.5).clamp(0.0, 1.0))
+            .collect();
+        assert!(worst(&got, &want) < 1e-5);
+        assert!(want.contains(&0.0) && want.iter().any(|&v| v > 1.0));
+    }
+
     #[test]
     fn activations_fuse_only_into_values_read_once() {
         let k = f32s(&[3, 2, 1, 1], 3);

@@ -1,7 +1,9 @@
-//! The kernels of [`super::Plan`]'s steps: plain loops over row-major f32 buffers, matrix
-//! products through nalgebra (which hands f32 products larger than 5 × 5 to the
-//! `matrixmultiply` crate's blocked kernels, AVX / FMA chosen at run time), depthwise
-//! convolutions through [`crate::redetect::dwconv`].
+//! The kernels of [`super::Plan`]'s steps: plain loops over row-major f32 buffers; one-group
+//! convolutions by [`rows_product`] (8 × 8 outputs summed in registers, the weights packed
+//! once at plan time, AVX2 / FMA chosen at run time); `MatMul`, `Gemm` and grouped
+//! convolutions through nalgebra (which hands f32 products larger than 5 × 5 to the
+//! `matrixmultiply` crate's blocked kernels); depthwise convolutions through
+//! [`crate::redetect::dwconv`].
 
 use nalgebra::{DMatrixView, DMatrixViewMut};
 
@@ -73,37 +75,53 @@ pub(super) enum Unary {
     Clip(f32, f32),
 }
 
+impl Unary {
+    /// `f(x)`: the one formula every kernel applies.
+    #[inline(always)]
+    pub(super) fn eval(self, x: f32) -> f32 {
+        match self {
+            Unary::Relu => x.max(0.0),
+            Unary::Sigmoid => 1.0 / (1.0 + (-x).exp()),
+            Unary::Exp => x.exp(),
+            Unary::HardSigmoid(a, b) => (a * x + b).clamp(0.0, 1.0),
+            Unary::HardSwish => x * (x * (1.0 / 6.0) + 0.5).clamp(0.0, 1.0),
+            Unary::Clip(lo, hi) => x.max(lo).min(hi),
+        }
+    }
+}
+
 /// `y = f(x)`.
 #[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 clone, chosen at run time
 pub(super) fn unary(f: Unary, x: &[f32], y: &mut [f32]) {
+    // One loop per function, so that each is vectorised with the function inlined.
     let it = y.iter_mut().zip(x);
     match f {
-        Unary::Relu => it.for_each(|(y, &x)| *y = x.max(0.0)),
-        Unary::Sigmoid => it.for_each(|(y, &x)| *y = 1.0 / (1.0 + (-x).exp())),
-        Unary::Exp => it.for_each(|(y, &x)| *y = x.exp()),
-        Unary::HardSigmoid(a, b) => it.for_each(|(y, &x)| *y = (a * x + b).clamp(0.0, 1.0)),
-        Unary::HardSwish => {
-            let (a, b) = (1.0 / 6.0, 0.5);
-            it.for_each(|(y, &x)| *y = x * (a * x + b).clamp(0.0, 1.0));
+        Unary::Relu => it.for_each(|(y, &x)| *y = Unary::Relu.eval(x)),
+        Unary::Sigmoid => it.for_each(|(y, &x)| *y = Unary::Sigmoid.eval(x)),
+        Unary::Exp => it.for_each(|(y, &x)| *y = Unary::Exp.eval(x)),
+        Unary::HardSigmoid(..) | Unary::Clip(..) | Unary::HardSwish => {
+            it.for_each(|(y, &x)| *y = f.eval(x));
         }
-        Unary::Clip(lo, hi) => it.for_each(|(y, &x)| *y = x.max(lo).min(hi)),
     }
 }
 
 /// `y = f(y)` (an activation fused into the step that wrote `y`).
 #[multiversion::multiversion(targets("x86_64+avx2+fma"))]
 pub(super) fn unary_in_place(f: Unary, y: &mut [f32]) {
+    apply_in_place(f, y);
+}
+
+/// [`unary_in_place`]'s loops, inlined into the kernels that store activated values.
+#[inline(always)]
+fn apply_in_place(f: Unary, y: &mut [f32]) {
+    // One loop per function, so that each is vectorised with the function inlined.
     match f {
-        Unary::Relu => y.iter_mut().for_each(|y| *y = y.max(0.0)),
-        Unary::Sigmoid => y.iter_mut().for_each(|y| *y = 1.0 / (1.0 + (-*y).exp())),
-        Unary::Exp => y.iter_mut().for_each(|y| *y = y.exp()),
-        Unary::HardSigmoid(a, b) => y.iter_mut().for_each(|y| *y = (a * *y + b).clamp(0.0, 1.0)),
-        Unary::HardSwish => {
-            let (a, b) = (1.0 / 6.0, 0.5);
-            y.iter_mut()
-                .for_each(|y| *y *= (a * *y + b).clamp(0.0, 1.0));
+        Unary::Relu => y.iter_mut().for_each(|y| *y = Unary::Relu.eval(*y)),
+        Unary::Sigmoid => y.iter_mut().for_each(|y| *y = Unary::Sigmoid.eval(*y)),
+        Unary::Exp => y.iter_mut().for_each(|y| *y = Unary::Exp.eval(*y)),
+        Unary::HardSigmoid(..) | Unary::Clip(..) | Unary::HardSwish => {
+            y.iter_mut().for_each(|y| *y = f.eval(*y));
         }
-        Unary::Clip(lo, hi) => y.iter_mut().for_each(|y| *y = y.max(lo).min(hi)),
     }
 }
 
@@ -284,6 +302,42 @@ pub(super) struct ConvShape {
     pub(super) groups: usize,
 }
 
+/// `out[ox]` = the input value of plane `src` under tap `(ky, kx)` of output `(oy, ox)`,
+/// zero outside (`out` holds one output row).
+fn tap_row(s: &ConvShape, src: &[f32], (ky, kx): (usize, usize), oy: usize, out: &mut [f32]) {
+    let y = (oy * s.sh + ky).checked_sub(s.pt).filter(|&y| y < s.h);
+    let Some(y) = y else {
+        out.fill(0.0);
+        return;
+    };
+    // Output columns whose input column ox·sw + kx − pl lies in [0, w).
+    let first = s.pl.saturating_sub(kx).div_ceil(s.sw).min(s.ow);
+    let end = (s.w + s.pl)
+        .checked_sub(kx)
+        .map_or(0, |v| v.div_ceil(s.sw))
+        .clamp(first, s.ow);
+    out[..first].fill(0.0);
+    out[end..].fill(0.0);
+    if first < end {
+        let x0 = first * s.sw + kx - s.pl;
+        let line = &src[y * s.w + x0..(y + 1) * s.w];
+        let out = &mut out[first..end];
+        if s.sw == 1 {
+            out.copy_from_slice(&line[..out.len()]);
+        } else if let Some((last, head)) = out.split_last_mut().filter(|_| s.sw == 2) {
+            // Every other value: a loop the compiler vectorises with shuffles.
+            for (o, pair) in head.iter_mut().zip(line.chunks_exact(2)) {
+                *o = pair[0];
+            }
+            *last = line[2 * head.len()];
+        } else {
+            for (o, taps) in out.iter_mut().zip(line.chunks(s.sw)) {
+                *o = taps[0];
+            }
+        }
+    }
+}
+
 /// `col[(ci·kh + ky)·kw + kx][oy·ow + ox]` = the input value under tap `(ky, kx)` of output
 /// `(oy, ox)` for input channel `ci` of `x` (`cg` planes), zero outside.
 pub(super) fn im2col(s: &ConvShape, cg: usize, x: &[f32], col: &mut [f32]) {
@@ -294,29 +348,143 @@ pub(super) fn im2col(s: &ConvShape, cg: usize, x: &[f32], col: &mut [f32]) {
             for kx in 0..s.kw {
                 let row = ((ci * s.kh + ky) * s.kw + kx) * plane;
                 let dst = &mut col[row..row + plane];
-                // Output columns whose input column ox·sw + kx − pl lies in [0, w).
-                let first = s.pl.saturating_sub(kx).div_ceil(s.sw).min(s.ow);
-                let end = (s.w + s.pl)
-                    .checked_sub(kx)
-                    .map_or(0, |v| v.div_ceil(s.sw))
-                    .clamp(first, s.ow);
                 for (oy, out) in dst.chunks_exact_mut(s.ow).enumerate() {
-                    let y = (oy * s.sh + ky).checked_sub(s.pt).filter(|&y| y < s.h);
-                    let Some(y) = y else {
-                        out.fill(0.0);
-                        continue;
-                    };
-                    out[..first].fill(0.0);
-                    out[end..].fill(0.0);
-                    if first < end {
-                        let x0 = first * s.sw + kx - s.pl;
-                        let line = &src[y * s.w + x0..];
-                        let taps = line.iter().step_by(s.sw);
-                        for (o, &v) in out[first..end].iter_mut().zip(taps) {
-                            *o = v;
-                        }
+                    tap_row(s, src, (ky, kx), oy, out);
+                }
+            }
+        }
+    }
+}
+
+/// [`im2col`] of output row `oy` alone: `col[(ci·kh + ky)·kw + kx][ox]`, all `s.c` channels.
+pub(super) fn im2col_row(s: &ConvShape, x: &[f32], oy: usize, col: &mut [f32]) {
+    let mut rows = col.chunks_exact_mut(s.ow);
+    for src in x.chunks_exact(s.h * s.w).take(s.c) {
+        for ky in 0..s.kh {
+            for kx in 0..s.kw {
+                if let Some(out) = rows.next() {
+                    tap_row(s, src, (ky, kx), oy, out);
+                }
+            }
+        }
+    }
+}
+
+/// Output channels per block of [`rows_product`]'s packed weights.
+pub(super) const BLOCK_M: usize = 8;
+/// Output columns per step of [`rows_product`].
+const BLOCK_N: usize = 8;
+
+/// Columns of the input a 1 × 1 convolution copies together for [`rows_product`]: about
+/// 16 KB of input (`k` rows), in whole blocks, at most 256. Its planes' rows lie a power of
+/// two apart (64 × 64 values: 16 KB), where reading them in place maps every row to the
+/// same cache set.
+pub(super) fn tile_cols(k: usize) -> usize {
+    ((4096 / k.max(1)) / BLOCK_N * BLOCK_N).clamp(BLOCK_N, 256)
+}
+
+/// A 1 × 1 convolution of one batch item: `y[i][j] = act(Σ_p w[i][p] · x[p][j] + bias[i])`
+/// over planes of `plane` values, by [`rows_product`] on tiles of [`tile_cols`] columns
+/// copied into `tile` (at least `k · tile_cols(k)` values).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn pointwise(
+    (m, k, plane): (usize, usize, usize),
+    wp: &[f32],
+    x: &[f32],
+    bias: &[f32],
+    act: Option<Unary>,
+    y: &mut [f32],
+    tile: &mut [f32],
+) {
+    let nt = tile_cols(k);
+    for j in (0..plane).step_by(nt) {
+        let cols = nt.min(plane - j);
+        for (p, t) in tile.chunks_exact_mut(cols).take(k).enumerate() {
+            t.copy_from_slice(&x[p * plane + j..p * plane + j + cols]);
+        }
+        rows_product((m, k, cols), wp, tile, cols, bias, act, &mut y[j..], plane);
+    }
+}
+
+/// A row-major `m × k` matrix packed for [`rows_product`]: per block of [`BLOCK_M`] rows,
+/// `k` groups of `BLOCK_M` values (column `p` of the block's rows), zeros past row `m`.
+pub(super) fn pack_rows(w: &[f32], m: usize, k: usize) -> Vec<f32> {
+    let blocks = m.div_ceil(BLOCK_M);
+    let mut out = vec![0.0; blocks * k * BLOCK_M];
+    for (i, row) in w.chunks_exact(k).take(m).enumerate() {
+        let block = &mut out[(i / BLOCK_M) * k * BLOCK_M..];
+        for (p, &v) in row.iter().enumerate() {
+            block[p * BLOCK_M + i % BLOCK_M] = v;
+        }
+    }
+    out
+}
+
+/// `y[i·ys + j] = act(Σ_p w[i][p] · x[p·xs + j] + bias[i])` for `i < m`, `j < n`: a matrix
+/// product whose right operand's rows lie `xs` apart (a 1 × 1 convolution's input planes,
+/// or one output row's im2col), the bias and an activation applied as each value is
+/// stored. `wp` is `w` packed by [`pack_rows`].
+///
+/// Each sum runs over `p` in order from zero by fused multiply-adds, then adds the bias:
+/// the order of `matrixmultiply`'s FMA kernel with the bias in C, which computed these
+/// before. 8 × 8 outputs are summed in registers (no packing of `x`: its rows are read
+/// in place, which is what the small-`k` products of a mobile network need).
+#[allow(clippy::too_many_arguments)]
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))]
+pub(super) fn rows_product(
+    (m, k, n): (usize, usize, usize),
+    wp: &[f32],
+    x: &[f32],
+    xs: usize,
+    bias: &[f32],
+    act: Option<Unary>,
+    y: &mut [f32],
+    ys: usize,
+) {
+    if k == 0 {
+        // No input (plans refuse empty tensors; kept total for the kernel's own sake).
+        for i in 0..m {
+            let v = act.map_or(bias[i], |f| f.eval(bias[i]));
+            y[i * ys..i * ys + n].fill(v);
+        }
+        return;
+    }
+    let full = n - n % BLOCK_N;
+    for (b, wb) in wp.chunks_exact(k * BLOCK_M).enumerate() {
+        let i0 = b * BLOCK_M;
+        let rows = BLOCK_M.min(m.saturating_sub(i0));
+        for j in (0..full).step_by(BLOCK_N) {
+            let mut acc = [[0.0f32; BLOCK_N]; BLOCK_M];
+            for (p, w) in wb.chunks_exact(BLOCK_M).enumerate() {
+                let xr = &x[p * xs + j..p * xs + j + BLOCK_N];
+                for (a, &w) in acc.iter_mut().zip(w) {
+                    for (a, &x) in a.iter_mut().zip(xr) {
+                        *a = w.mul_add(x, *a);
                     }
                 }
+            }
+            for (i, a) in acc.iter().enumerate().take(rows) {
+                let b = bias[i0 + i];
+                let at = (i0 + i) * ys + j;
+                for (y, &a) in y[at..at + BLOCK_N].iter_mut().zip(a) {
+                    *y = a + b;
+                }
+            }
+        }
+        for j in full..n {
+            for i in 0..rows {
+                let mut a = 0.0f32;
+                for (p, w) in wb.chunks_exact(BLOCK_M).enumerate() {
+                    a = w[i].mul_add(x[p * xs + j], a);
+                }
+                y[(i0 + i) * ys + j] = a + bias[i0 + i];
+            }
+        }
+        // The activation over each finished row while it is in cache (a loop the compiler
+        // vectorises, unlike one per block).
+        if let Some(f) = act {
+            for i in i0..i0 + rows {
+                apply_in_place(f, &mut y[i * ys..i * ys + n]);
             }
         }
     }
@@ -330,9 +498,24 @@ pub(super) fn fill_bias(y: &mut [f32], bias: &[f32], len: usize) {
 }
 
 /// `y[i] = mean of x's i-th run of `len` values`.
+///
+/// Summed in 8 interleaved partial sums (lane `i` takes the values at `i` mod 8), added
+/// pairwise at the end, so that the loop vectorises.
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))]
 pub(super) fn mean_pool(x: &[f32], len: usize, y: &mut [f32]) {
     for (y, run) in y.iter_mut().zip(x.chunks_exact(len)) {
-        *y = run.iter().sum::<f32>() / len as f32;
+        let mut lanes = [0.0f32; 8];
+        let mut chunks = run.chunks_exact(8);
+        for c in &mut chunks {
+            for (l, &v) in lanes.iter_mut().zip(c) {
+                *l += v;
+            }
+        }
+        for (l, &v) in lanes.iter_mut().zip(chunks.remainder()) {
+            *l += v;
+        }
+        let [a, b, c, d, e, f, g, h] = lanes;
+        *y = (((a + e) + (b + f)) + ((c + g) + (d + h))) / len as f32;
     }
 }
 
