@@ -425,9 +425,8 @@ pub(super) fn pack_rows(w: &[f32], m: usize, k: usize) -> Vec<f32> {
 /// or one output row's im2col), the bias and an activation applied as each value is
 /// stored. `wp` is `w` packed by [`pack_rows`].
 ///
-/// Each sum runs over `p` in order from zero by fused multiply-adds, then adds the bias:
-/// the order of `matrixmultiply`'s FMA kernel with the bias in C, which computed these
-/// before. 8 × 8 outputs are summed in registers (no packing of `x`: its rows are read
+/// Each sum runs over `p` in order from zero (by fused multiply-adds where the CPU has
+/// them), then adds the bias. 8 × 8 outputs are summed in registers (no packing of `x`: its rows are read
 /// in place, which is what the small-`k` products of a mobile network need).
 #[allow(clippy::too_many_arguments)]
 #[multiversion::multiversion(targets("x86_64+avx2+fma"))]
@@ -449,6 +448,13 @@ pub(super) fn rows_product(
         }
         return;
     }
+    // A fused multiply-add where the selected clone has one (this machine's AVX2 clone, every
+    // aarch64); a multiply and an add elsewhere: `mul_add` without the instruction is a
+    // software routine many times slower (x86-64 CPUs without FMA, such as the Atoms of
+    // some companion computers).
+    let fma =
+        multiversion::target::target_cfg_f!(any(target_feature = "fma", target_arch = "aarch64"));
+    let madd = |w: f32, x: f32, a: f32| if fma { w.mul_add(x, a) } else { w * x + a };
     let full = n - n % BLOCK_N;
     for (b, wb) in wp.chunks_exact(k * BLOCK_M).enumerate() {
         let i0 = b * BLOCK_M;
@@ -459,7 +465,7 @@ pub(super) fn rows_product(
                 let xr = &x[p * xs + j..p * xs + j + BLOCK_N];
                 for (a, &w) in acc.iter_mut().zip(w) {
                     for (a, &x) in a.iter_mut().zip(xr) {
-                        *a = w.mul_add(x, *a);
+                        *a = madd(w, x, *a);
                     }
                 }
             }
@@ -475,7 +481,7 @@ pub(super) fn rows_product(
             for i in 0..rows {
                 let mut a = 0.0f32;
                 for (p, w) in wb.chunks_exact(BLOCK_M).enumerate() {
-                    a = w[i].mul_add(x[p * xs + j], a);
+                    a = madd(w[i], x[p * xs + j], a);
                 }
                 y[(i0 + i) * ys + j] = a + bias[i0 + i];
             }
