@@ -9,6 +9,7 @@ use crate::features::{FeatureExtractor, FeatureMap};
 use crate::filter::response::{fused_response, LayerSlot};
 use crate::geometry::GridSize;
 use crate::image::{Frame, Patch, PixelFormat, Sampler};
+use crate::nn::ops::{pack_rows, rows_product, Unary};
 use crate::redetect::dwconv::{depthwise, Geometry, Scratch};
 use crate::Point2;
 use rustfft::num_complex::Complex32;
@@ -33,7 +34,8 @@ fn lcg(seed: &mut u64) -> f32 {
 }
 
 /// The bits of the sampler (down- and upscaling), fHOG with grey and colour names, the
-/// depthwise kernel (3×3 stride 1 and 5×5 stride 2) and the fused response on fixed input.
+/// depthwise kernel (3×3 stride 1 and 5×5 stride 2), the fused response and the networks'
+/// matrix product on fixed input.
 fn kernel_bits() -> Vec<u64> {
     let (w, h) = (320usize, 180usize);
     let data: Vec<u8> = (0..w * h * 3)
@@ -95,12 +97,22 @@ fn kernel_bits() -> Vec<u64> {
     fused_response(&g_f, &x_f, &layers, bins, &mut resp);
     let flat: Vec<f32> = resp.iter().flat_map(|v| [v.re, v.im]).collect();
     out.push(fnv(&flat, 0xcbf2_9ce4_8422_2325));
+    // The networks' one-group convolutions: 11 output channels (a partial block), 29 inputs,
+    // 21 columns (whole blocks and a rest), a ReLU applied as it stores.
+    let (m, k, n) = (11usize, 29usize, 21usize);
+    let w: Vec<f32> = (0..m * k).map(|_| lcg(&mut seed) - 0.5).collect();
+    let x: Vec<f32> = (0..k * n).map(|_| lcg(&mut seed) - 0.5).collect();
+    let bias: Vec<f32> = (0..m).map(|_| lcg(&mut seed) - 0.5).collect();
+    let mut y = vec![0.0; m * n];
+    let wp = pack_rows(&w, m, k);
+    rows_product((m, k, n), &wp, &x, n, &bias, Some(Unary::Relu), &mut y, n);
+    out.push(fnv(&y, 0xcbf2_9ce4_8422_2325));
     out
 }
 
 /// Pinned on 2026-11-27 from the AMD host's run with the AVX2 clones, and equal under
 /// `qemu-x86_64 -cpu Nehalem` (no AVX: the baseline versions), docs/benchmarks.md.
-const PINNED: [u64; 7] = [
+const PINNED: [u64; 8] = [
     0x9bd72564e9887679, // sampler, 120 px region to 48 px
     0x1cae2f33cb65cb49, // fHOG + grey + colour names of it
     0xdce991673a7e2c9a, // sampler, 40 px region to 96 px
@@ -108,6 +120,7 @@ const PINNED: [u64; 7] = [
     0x9731de3210aa1b6a, // depthwise 3×3, stride 1
     0xbabe173a1e42fe34, // depthwise 5×5, stride 2
     0x7fbef409158440f6, // fused response
+    0xa5465843eb25a6cf, // nn's rows_product, 11 × 29 by 29 × 21, ReLU
 ];
 
 #[test]

@@ -20,7 +20,7 @@
 //! has the measured build and per-pass figures.
 
 pub mod onnx;
-mod ops;
+pub(crate) mod ops;
 
 use crate::redetect::dwconv;
 use onnx::{Attr, Data, Model, Node, Tensor};

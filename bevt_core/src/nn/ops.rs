@@ -60,7 +60,7 @@ const SMALL: usize = 5;
 
 /// An elementwise function of one input.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) enum Unary {
+pub(crate) enum Unary {
     /// `max(x, 0)`.
     Relu,
     /// `1 / (1 + e^−x)`.
@@ -408,7 +408,7 @@ pub(super) fn pointwise(
 
 /// A row-major `m × k` matrix packed for [`rows_product`]: per block of [`BLOCK_M`] rows,
 /// `k` groups of `BLOCK_M` values (column `p` of the block's rows), zeros past row `m`.
-pub(super) fn pack_rows(w: &[f32], m: usize, k: usize) -> Vec<f32> {
+pub(crate) fn pack_rows(w: &[f32], m: usize, k: usize) -> Vec<f32> {
     let blocks = m.div_ceil(BLOCK_M);
     let mut out = vec![0.0; blocks * k * BLOCK_M];
     for (i, row) in w.chunks_exact(k).take(m).enumerate() {
@@ -425,12 +425,11 @@ pub(super) fn pack_rows(w: &[f32], m: usize, k: usize) -> Vec<f32> {
 /// or one output row's im2col), the bias and an activation applied as each value is
 /// stored. `wp` is `w` packed by [`pack_rows`].
 ///
-/// Each sum runs over `p` in order from zero (by fused multiply-adds where the CPU has
-/// them), then adds the bias. 8 × 8 outputs are summed in registers (no packing of `x`: its rows are read
+/// Each sum runs over `p` in order from zero, then adds the bias. 8 × 8 outputs are summed in registers (no packing of `x`: its rows are read
 /// in place, which is what the small-`k` products of a mobile network need).
 #[allow(clippy::too_many_arguments)]
 #[multiversion::multiversion(targets("x86_64+avx2+fma"))]
-pub(super) fn rows_product(
+pub(crate) fn rows_product(
     (m, k, n): (usize, usize, usize),
     wp: &[f32],
     x: &[f32],
@@ -448,24 +447,26 @@ pub(super) fn rows_product(
         }
         return;
     }
-    // A fused multiply-add where the selected clone has one (this machine's AVX2 clone, every
-    // aarch64); a multiply and an add elsewhere: `mul_add` without the instruction is a
-    // software routine many times slower (x86-64 CPUs without FMA, such as the Atoms of
-    // some companion computers).
-    let fma =
-        multiversion::target::target_cfg_f!(any(target_feature = "fma", target_arch = "aarch64"));
-    let madd = |w: f32, x: f32, a: f32| if fma { w.mul_add(x, a) } else { w * x + a };
+    // A multiply and an add, not `mul_add`: every clone (AVX2, the x86-64 baseline, aarch64)
+    // then gives the same bits (dispatch_tests pins them), and no clone can fall back to
+    // glibc's software `fmaf` (x86-64 CPUs without FMA). With 8 independent sums per row
+    // the add's latency is what bounds the loop, as the FMA's did: equal speed on the AMD
+    // host (verifier_passes search 400: 2.31-2.51 s user against 2.34-2.41 with FMA).
+    let madd = |w: f32, x: f32, a: f32| a + w * x;
     let full = n - n % BLOCK_N;
     for (b, wb) in wp.chunks_exact(k * BLOCK_M).enumerate() {
         let i0 = b * BLOCK_M;
         let rows = BLOCK_M.min(m.saturating_sub(i0));
         for j in (0..full).step_by(BLOCK_N) {
             let mut acc = [[0.0f32; BLOCK_N]; BLOCK_M];
+            // The row's values copied into an array first: written on the slice, the same
+            // loop was vectorised across the wrong dimension (shuffles, 4× slower).
             for (p, w) in wb.chunks_exact(BLOCK_M).enumerate() {
-                let xr = &x[p * xs + j..p * xs + j + BLOCK_N];
+                let mut xv = [0.0f32; BLOCK_N];
+                xv.copy_from_slice(&x[p * xs + j..p * xs + j + BLOCK_N]);
                 for (a, &w) in acc.iter_mut().zip(w) {
-                    for (a, &x) in a.iter_mut().zip(xr) {
-                        *a = madd(w, x, *a);
+                    for l in 0..BLOCK_N {
+                        a[l] = madd(w, xv[l], a[l]);
                     }
                 }
             }
