@@ -30,9 +30,12 @@ if ! have_tools; then
   fi
   echo "fastdds-peer: installing ${packages[*]} with apt-get" >&2
   export DEBIAN_FRONTEND=noninteractive
-  if ! timeout 300 apt-get install -y --no-install-recommends "${packages[@]}" >&2; then
-    timeout 120 apt-get update >&2 || true
-    if ! timeout 300 apt-get install -y --no-install-recommends "${packages[@]}" >&2; then
+  # -o DPkg::Lock::Timeout: wait for another apt-get (CI's background aarch64 build may run
+  # one at the same time) instead of failing.
+  apt=(apt-get -o DPkg::Lock::Timeout=240)
+  if ! timeout 300 "${apt[@]}" install -y --no-install-recommends "${packages[@]}" >&2; then
+    timeout 120 "${apt[@]}" update >&2 || true
+    if ! timeout 300 "${apt[@]}" install -y --no-install-recommends "${packages[@]}" >&2; then
       echo "fastdds-peer: apt-get install ${packages[*]} failed" >&2
       exit 1
     fi

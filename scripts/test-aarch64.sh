@@ -61,8 +61,9 @@ step() { printf 'test-aarch64: %s (%ss)\n' "$1" "$SECONDS" >&2; }
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 apt_updated=
 apt_install() {
-  [ -n "$apt_updated" ] || { as_root apt-get update -q >/dev/null; apt_updated=1; }
-  as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q "$@" >/dev/null
+  # Wait for another apt-get (CI's Fast DDS step may run one at the same time).
+  [ -n "$apt_updated" ] || { as_root apt-get -o DPkg::Lock::Timeout=600 update -q >/dev/null; apt_updated=1; }
+  as_root env DEBIAN_FRONTEND=noninteractive apt-get -o DPkg::Lock::Timeout=600 install -y -q "$@" >/dev/null
 }
 
 step "toolchain"
