@@ -421,12 +421,13 @@ pub(crate) fn pack_rows(w: &[f32], m: usize, k: usize) -> Vec<f32> {
 }
 
 /// `y[i·ys + j] = act(Σ_p w[i][p] · x[p·xs + j] + bias[i])` for `i < m`, `j < n`: a matrix
-/// product whose right operand's rows lie `xs` apart (a 1 × 1 convolution's input planes,
-/// or one output row's im2col), the bias and an activation applied as each value is
+/// product whose right operand's rows lie `xs` apart (a tile of a 1 × 1 convolution's input
+/// planes, or one output row's im2col), the bias and an activation applied as each value is
 /// stored. `wp` is `w` packed by [`pack_rows`].
 ///
-/// Each sum runs over `p` in order from zero, then adds the bias. 8 × 8 outputs are summed in registers (no packing of `x`: its rows are read
-/// in place, which is what the small-`k` products of a mobile network need).
+/// Each sum runs over `p` in order from zero, then adds the bias. 8 × 8 outputs are summed
+/// in registers, each of `x`'s values loaded once for 8 broadcast weights; `x`'s rows are
+/// read where they lie (`pointwise` copies a 1 × 1 convolution's into tiles first).
 #[allow(clippy::too_many_arguments)]
 #[multiversion::multiversion(targets("x86_64+avx2+fma"))]
 pub(crate) fn rows_product(
@@ -440,7 +441,7 @@ pub(crate) fn rows_product(
     ys: usize,
 ) {
     if k == 0 {
-        // No input (plans refuse empty tensors; kept total for the kernel's own sake).
+        // No input: the bias alone (plans refuse empty tensors; the kernel stays total).
         for i in 0..m {
             let v = act.map_or(bias[i], |f| f.eval(bias[i]));
             y[i * ys..i * ys + n].fill(v);
