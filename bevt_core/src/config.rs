@@ -435,6 +435,12 @@ pub struct RedetectionConfig {
     /// (`reacquire_threshold`, `reacquire_relative`). Off by default: it refuses a
     /// look-alike, but on the dev set also the real target after a long loss.
     pub verifier_filter_check: bool,
+    /// On a lost frame the verifier's first tile pass goes to the frozen filter's most
+    /// confident window of the frame (while no verifier candidate is being followed): the
+    /// cheap witness points, the learned one checks there before walking its tiles on.
+    /// Off by default: it re-acquires sooner with fewer passes, but the states flag the
+    /// failures that remain less precisely (docs/states.md).
+    pub verifier_filter_hint: bool,
 }
 
 /// The learned re-detection verifier (`redetection.verifier`).
@@ -470,6 +476,7 @@ impl Default for RedetectionConfig {
             verifier_scales: vec![1.0, 0.7],
             verifier_threshold: 5.0,
             verifier_filter_check: false,
+            verifier_filter_hint: false,
         }
     }
 }

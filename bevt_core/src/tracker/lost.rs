@@ -43,6 +43,31 @@ const VERIFIER_TILE_STRIDE: f32 = 0.75;
 /// the candidate.
 const VERIFIER_NEAR: f32 = 0.5;
 
+/// The frozen filter's most confident window of a lost frame: its confidence and peak
+/// score (reported with the frame) and where it points (the hint for the verifier,
+/// `redetection.verifier_filter_hint`).
+#[derive(Debug, Clone, Copy)]
+struct BestWindow {
+    confidence: f32,
+    peak: f32,
+    pos: Point2,
+    scale: f32,
+}
+
+impl BestWindow {
+    /// Keeps the window (`(pos, confidence, peak)` at `scale`) when it is more confident.
+    fn offer(&mut self, (pos, confidence, peak): (Point2, f32, f32), scale: f32) {
+        if confidence > self.confidence {
+            *self = Self {
+                confidence,
+                peak,
+                pos,
+                scale,
+            };
+        }
+    }
+}
+
 /// A saved model: filter, appearance model and ideal response, position and scale, and the
 /// learning gate's reference level of the score.
 #[derive(Debug, Default)]
@@ -243,7 +268,10 @@ fn hit_scale(st: &State, hit: &VerifierHit) -> f32 {
 }
 
 /// One lost frame of the learned verifier: follow its candidate (one pass while it holds),
-/// or spend `verifier_windows` on the whole-frame tiles; the candidate once it has been above
+/// or spend `verifier_windows` on the whole-frame tiles, the first of them (with
+/// `verifier_filter_hint`) on `hint`, the frozen filter's most confident window of the
+/// frame (position and absolute scale): the cheap witness points, the learned one looks
+/// there before it walks on. The candidate once it has been above
 /// `verifier_threshold` for `reacquire_frames` frames in a row and (with
 /// `verifier_filter_check`) the frozen filter makes it a candidate too. A candidate the
 /// filter refuses is dropped (it must be confirmed anew).
@@ -252,6 +280,7 @@ fn verify(
     frame: &Frame<'_>,
     spec: &TrackerSpec,
     v: &mut dyn Verifier,
+    hint: (Point2, f32),
 ) -> Result<Option<Candidate>, TrackError> {
     let r = &spec.config.redetection;
     let thr = r.verifier_threshold;
@@ -285,14 +314,20 @@ fn verify(
             passes.saturating_sub(1)
         };
     }
+    let mut hint = r.verifier_filter_hint.then_some(hint);
     for _ in 0..passes {
-        let Some(w) = st.lost.vplan.next_window() else {
-            break;
+        let (center, scale) = match hint.take() {
+            Some(h) => h,
+            None => {
+                let Some(w) = st.lost.vplan.next_window() else {
+                    break;
+                };
+                (w.center, st.lost.scale_at_loss * w.scale)
+            }
         };
-        let scale = st.lost.scale_at_loss * w.scale;
         let side = 2.0 * verifier_side(st, scale);
         st.verifier_passes += 1;
-        if let Some(Scored::Hit(h)) = v.search_above(frame, w.center, side, thr)? {
+        if let Some(Scored::Hit(h)) = v.search_above(frame, center, side, thr)? {
             let scale = hit_scale(st, &h);
             st.lost.vcand.offer(h.pos, scale, h.score, thr);
         }
@@ -382,7 +417,12 @@ pub(super) fn search(
     let (scale, cand) = (st.scale, st.lost.candidates.current());
     let (pos, conf, peak) = evaluate(st, frame, st.pos, scale, spec)?;
     st.pos = pos;
-    let mut best = (conf, peak);
+    let mut best = BestWindow {
+        confidence: conf,
+        peak,
+        pos,
+        scale,
+    };
     budget = budget.saturating_sub(1);
     match cand {
         Some(_) if st.lost.candidates.is_candidate(pos) => {
@@ -390,9 +430,7 @@ pub(super) fn search(
         }
         Some(c) => {
             let (cpos, cconf, cpeak) = evaluate(st, frame, c.pos, c.scale, spec)?;
-            if cconf > best.0 {
-                best = (cconf, cpeak);
-            }
+            best.offer((cpos, cconf, cpeak), c.scale);
             st.lost.candidates.followed(cpos, c.scale, cconf, threshold);
             st.lost.candidates.offer(pos, scale, conf, threshold);
             budget = budget.saturating_sub(1);
@@ -416,9 +454,7 @@ pub(super) fn search(
     for pr in proposals {
         let scale = st.lost.scale_at_loss;
         let (pos, conf, peak) = evaluate(st, frame, pr.center, scale, spec)?;
-        if conf > best.0 {
-            best = (conf, peak);
-        }
+        best.offer((pos, conf, peak), scale);
         st.lost.candidates.offer(pos, scale, conf, threshold);
         budget = budget.saturating_sub(1);
     }
@@ -428,18 +464,18 @@ pub(super) fn search(
         };
         let scale = (st.lost.scale_at_loss * w.scale).clamp(st.min_scale, st.max_scale);
         let (pos, conf, peak) = evaluate(st, frame, w.center, scale, spec)?;
-        if conf > best.0 {
-            best = (conf, peak);
-        }
+        best.offer((pos, conf, peak), scale);
         st.lost.candidates.offer(pos, scale, conf, threshold);
     }
     let accepted = match st.lost.candidates.end_frame(p.reacquire_frames) {
         Some(c) => Some(c),
         None => match verifier {
-            Some(v) if p.enabled => verify(st, frame, spec, v)?.map(|c| Candidate {
-                confidence: best.0.max(st.lost.threshold),
-                ..c
-            }),
+            Some(v) if p.enabled => {
+                verify(st, frame, spec, v, (best.pos, best.scale))?.map(|c| Candidate {
+                    confidence: best.confidence.max(st.lost.threshold),
+                    ..c
+                })
+            }
             _ => None,
         },
     };
@@ -453,20 +489,20 @@ pub(super) fn search(
             st,
             c.pos,
             c.scale,
-            (LOST_CONSENSUS, false, best.1),
+            (LOST_CONSENSUS, false, best.peak),
             (c.confidence, state, reason),
         ));
     }
-    let (state, reason) = st.states.searching(best.0);
+    let (state, reason) = st.states.searching(best.confidence);
     let (pos, scale, conf) = match st.lost.candidates.current() {
         Some(c) => (c.pos, c.scale, c.confidence),
-        None => (st.pos, st.scale, best.0),
+        None => (st.pos, st.scale, best.confidence),
     };
     Ok(BevtTracker::output_at(
         st,
         pos,
         scale,
-        (LOST_CONSENSUS, false, best.1),
+        (LOST_CONSENSUS, false, best.peak),
         (conf, state, reason),
     ))
 }
