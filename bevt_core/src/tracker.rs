@@ -1282,14 +1282,31 @@ mod tests {
     }
 
     use crate::redetect::VerifierHit;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::{Arc, Mutex};
 
-    /// A verifier that disputes every box: its best hit is always at the region's centre
-    /// with score 1 (below `drift_threshold` and `verifier_threshold`), as the real one
-    /// scores a target whose appearance it no longer recognises (e.g. re-lit).
+    /// A verifier that knows where the target is (`truth`, the test sets it before each
+    /// frame; `None` while hidden): a hit on it, score 8, when its centre lies in the inner
+    /// half of the searched region, else a hit at the region's centre scoring 1. It counts
+    /// the searches in `calls`. Told nothing ([`Oracle::disputing`]) it disputes every box,
+    /// as the real one scores a target whose appearance it no longer recognises (e.g.
+    /// re-lit): below `drift_threshold` and `verifier_threshold`.
     #[derive(Debug)]
-    struct Disputing;
+    struct Oracle {
+        truth: Arc<Mutex<Option<Point2>>>,
+        calls: Arc<AtomicUsize>,
+    }
 
-    impl Verifier for Disputing {
+    impl Oracle {
+        fn disputing() -> Self {
+            Self {
+                truth: Arc::new(Mutex::new(None)),
+                calls: Arc::new(AtomicUsize::new(0)),
+            }
+        }
+    }
+
+    impl Verifier for Oracle {
         fn set_template(
             &mut self,
             _: &Frame<'_>,
@@ -1306,11 +1323,24 @@ mod tests {
             center: Point2,
             side: f32,
         ) -> Result<Option<VerifierHit>, TrackError> {
-            Ok(Some(VerifierHit {
-                pos: center,
-                w: side / 4.0,
-                h: side / 4.0,
-                score: 1.0,
+            self.calls.fetch_add(1, Ordering::Relaxed);
+            let truth = *self.truth.lock().unwrap();
+            let near = |t: &Point2| {
+                (t.x - center.x).abs() <= side / 4.0 && (t.y - center.y).abs() <= side / 4.0
+            };
+            Ok(Some(match truth.filter(near) {
+                Some(t) => VerifierHit {
+                    pos: t,
+                    w: side / 4.0,
+                    h: side / 4.0,
+                    score: 8.0,
+                },
+                None => VerifierHit {
+                    pos: center,
+                    w: side / 4.0,
+                    h: side / 4.0,
+                    score: 1.0,
+                },
             }))
         }
     }
@@ -1331,7 +1361,7 @@ mod tests {
         };
         let run = |anchor: bool| {
             let cfg = drift_only(5, 2, anchor);
-            let mut t = started_with(&seq, &cfg, Some(Box::new(Disputing)));
+            let mut t = started_with(&seq, &cfg, Some(Box::new(Oracle::disputing())));
             let out = states_of(&mut t, &seq);
             // The first frame is checked at once and disputed; the re-check 2 frames later
             // confirms the drift.
@@ -1459,56 +1489,6 @@ mod tests {
         );
     }
 
-    /// A verifier that knows where the target is (`truth`, the test sets it before each
-    /// frame; `None` while hidden): a hit on it, score 8, when its centre lies in the inner
-    /// half of the searched region, else a hit at the region's centre scoring 1. It counts
-    /// the searches in `calls`.
-    #[derive(Debug)]
-    struct Oracle {
-        truth: std::sync::Arc<std::sync::Mutex<Option<Point2>>>,
-        calls: std::sync::Arc<std::sync::atomic::AtomicUsize>,
-    }
-
-    impl Verifier for Oracle {
-        fn set_template(
-            &mut self,
-            _: &Frame<'_>,
-            _: Point2,
-            _: f32,
-            _: f32,
-        ) -> Result<(), TrackError> {
-            Ok(())
-        }
-
-        fn search(
-            &mut self,
-            _: &Frame<'_>,
-            center: Point2,
-            side: f32,
-        ) -> Result<Option<VerifierHit>, TrackError> {
-            self.calls
-                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            let truth = *self.truth.lock().unwrap();
-            let near = |t: &Point2| {
-                (t.x - center.x).abs() <= side / 4.0 && (t.y - center.y).abs() <= side / 4.0
-            };
-            Ok(Some(match truth.filter(near) {
-                Some(t) => VerifierHit {
-                    pos: t,
-                    w: side / 4.0,
-                    h: side / 4.0,
-                    score: 8.0,
-                },
-                None => VerifierHit {
-                    pos: center,
-                    w: side / 4.0,
-                    h: side / 4.0,
-                    score: 1.0,
-                },
-            }))
-        }
-    }
-
     /// `redetection.verifier_filter_hint`: a target that comes back beside where it was lost
     /// (57 px: outside the verifier's tile there, inside the filter's window), in a frame the
     /// verifier's tiles take many lost frames to walk, is found by the verifier as soon as
@@ -1535,11 +1515,11 @@ mod tests {
             cfg.redetection.reacquire_threshold = 1.0;
             cfg.redetection.verifier_filter_hint = hint;
             let windows = cfg.redetection.verifier_windows;
-            let truth = std::sync::Arc::new(std::sync::Mutex::new(None));
-            let calls = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+            let truth = Arc::new(Mutex::new(None));
+            let calls = Arc::new(AtomicUsize::new(0));
             let oracle = Oracle {
-                truth: std::sync::Arc::clone(&truth),
-                calls: std::sync::Arc::clone(&calls),
+                truth: Arc::clone(&truth),
+                calls: Arc::clone(&calls),
             };
             let mut t = started_with(&seq, &cfg, Some(Box::new(oracle)));
             for i in 1..seq.frames {
@@ -1547,9 +1527,9 @@ mod tests {
                 *truth.lock().unwrap() = f.visible.then(|| f.truth.center());
                 let frame =
                     Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
-                let before = calls.load(std::sync::atomic::Ordering::Relaxed);
+                let before = calls.load(Ordering::Relaxed);
                 let o = t.update(&frame).unwrap();
-                let passes = calls.load(std::sync::atomic::Ordering::Relaxed) - before;
+                let passes = calls.load(Ordering::Relaxed) - before;
                 if o.state == TrackState::Lost {
                     assert!(passes <= windows, "frame {i}: {passes} passes");
                 }
