@@ -110,9 +110,9 @@ if [ "$mode" != check ]; then
     --features "bevt_core/default,$node_features")
   # The cross build's own settings, for its two cargo commands only (the native build below
   # must keep the test command's profile, or it would all be compiled again): its own target
-  # dir. (The dev profile has no debuginfo, which the tests and the eval under qemu would not
-  # read.)
-  cross_env=(env CARGO_TARGET_DIR="$cross_dir")
+  # dir, and no line tables for our crates (the dependencies have none in dev already), which
+  # the tests and the eval under qemu do not read.
+  cross_env=(env CARGO_TARGET_DIR="$cross_dir" CARGO_PROFILE_DEV_DEBUG=false)
 
   step "build bevt_core's unit tests for $triple (bevt_node features: $features)"
   rm -f "$core_tests_file"
