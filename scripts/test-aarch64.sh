@@ -110,9 +110,14 @@ if [ "$mode" != check ]; then
     --features "bevt_core/default,$node_features")
   # The cross build's own settings, for its two cargo commands only (the native build below
   # must keep the test command's profile, or it would all be compiled again): its own target
-  # dir, and no line tables for our crates (the dependencies have none in dev already), which
-  # the tests and the eval under qemu do not read.
-  cross_env=(env CARGO_TARGET_DIR="$cross_dir" CARGO_PROFILE_DEV_DEBUG=false)
+  # dir; no line tables for our crates (the dependencies have none in dev already), which
+  # the tests and the eval under qemu do not read; and opt-level 0 instead of the dev
+  # profile's 1 for every package `Cargo.toml` does not name: what runs per frame under qemu
+  # keeps its own level (bevt_core and bevt_msgs at 3, the FFT, matrix and image decoding
+  # crates at 3, and the generic code bevt_core instantiates), the rest is glue run once.
+  # The cross build is CI's longest path and CI is CPU-bound.
+  cross_env=(env CARGO_TARGET_DIR="$cross_dir" CARGO_PROFILE_DEV_DEBUG=false
+    CARGO_PROFILE_DEV_OPT_LEVEL=0)
 
   step "build bevt_core's unit tests for $triple (bevt_node features: $features)"
   rm -f "$core_tests_file"
