@@ -124,14 +124,11 @@ if [ "$mode" != check ]; then
   # `--lib` of both packages also builds bevt_node's unit-test harness, which is not run here
   # (its tests run natively in `cargo test --workspace`): naming bevt_node is what keeps this
   # command's feature resolution equal to the program build's below, and no cargo option
-  # leaves out one package's harness. It is compiled at opt-level 0: the test profile only,
-  # and in this command bevt_node has no other unit (its library and the programs below are
-  # dev-profile units at the workspace's opt-levels, every dependency shared): 12 CPU-s against
-  # 41 at its dev opt-level 1 (2026-11-27). Running it under qemu instead would cost more than
-  # compiling it (43 CPU-s, 2026-11-27), and one of its tests fails there
-  # (tool::pipe::tests::a_closed_stdout_ends_the_program_quietly).
+  # leaves out one package's harness. `Cargo.toml` compiles bevt_node at opt-level 0 in dev
+  # and test builds (12 CPU-s for this harness against 41 at 1, 2026-11-27). Running it under
+  # qemu instead would cost more than compiling it (43 CPU-s, 2026-11-27), and one of its
+  # tests fails there (tool::pipe::tests::a_closed_stdout_ends_the_program_quietly).
   "${cross_env[@]}" cargo test --no-run "${selection[@]}" --lib \
-    --config 'profile.test.package.bevt_node.opt-level=0' \
     --message-format=json-render-diagnostics >"$work/test-build.json" ||
     fail "cross build of the unit tests"
   core_tests=$(python3 - "$work/test-build.json" <<'EOF'
