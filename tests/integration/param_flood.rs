@@ -148,8 +148,8 @@ fn a_flood_of_huge_describe_requests_leaves_memory_and_boxes_alone() {
     // The bound follows from what was sent, not from the process's own size: the steady RSS
     // differs between builds and hosts (75-82 MiB) while the flood's bytes do not (a bound of
     // twice the steady RSS failed in CI at 154,640 KiB against 2 x 75,112 for an increase the
-    // same as here). A node that answered each request in full, or kept the unread replies,
-    // would hold several times the flood (1,285 MB before the services were bounded).
+    // same as here). Before the services were bounded (a reply per name, 1000 unread replies
+    // kept) the same flood held 1,285 MB, about 20 times what was sent.
     assert!(
         peak <= steady + 2 * flood_kib,
         "peak RSS {peak} KiB: more than the steady {steady} KiB plus twice the {flood_kib} KiB sent"
