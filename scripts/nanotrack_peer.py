@@ -9,9 +9,12 @@ update reports failure) and <out>/timing.json, and prints per-sequence and poole
 (total frames / total tracking time). Score the boxes with
 `bevt eval ... --compare OpenCV-Nano-v2-here=<out>`.
 
-Usage (the project-local venv; opencv is a peer, not a test dependency):
-    .venv/bin/python -m pip install -r scripts/requirements-peers.txt
-    .venv/bin/python scripts/nanotrack_peer.py [DATASET] [OUT] [MODELS]
+scripts/speed-rounds.sh runs it in turn with `bevt eval` (its own venv under target/). By hand
+(a venv of its own: opencv is a peer, not a test dependency, and the project's .venv belongs to
+scripts/python-env.sh):
+    python3 -m venv target/venv-peers
+    target/venv-peers/bin/python -m pip install -r scripts/requirements-peers.txt
+    target/venv-peers/bin/python scripts/nanotrack_peer.py [DATASET] [OUT] [MODELS]
 """
 import json
 import math

@@ -1,0 +1,93 @@
+#!/usr/bin/env bash
+# Back-to-back speed rounds on the dev set, one thread each: the default, the default without
+# the drift rules, and OpenCV TrackerNano (scripts/nanotrack_peer.py, NanoTrack v2), in turn,
+# ROUNDS times. Prints every round's pooled fps (frames / tracking time, decoding excluded for
+# all three), the means, the default against TrackerNano (issue 19 asks >= 1.0x) and what the
+# drift rules cost (issue 20 allows 10 %). These VMs drift by 10-20 % within minutes, so only
+# figures of one run are compared with each other; docs/benchmarks.md quotes this script's.
+#
+# Usage: scripts/speed-rounds.sh [ROUNDS] [DATASET]
+#   ROUNDS   rounds of the three runs (default 5)
+#   DATASET  default ../shared/datasets/uav123_10fps_dev
+# Environment:
+#   BEVT       the bevt binary (default target/release/bevt, built by cargo when missing)
+#   PEER_VENV  venv with scripts/requirements-peers.txt (default target/venv-peers, created
+#              when it cannot import cv2; the project's .venv belongs to scripts/python-env.sh)
+# Boxes and logs of every run stay in a new directory under target/ (printed); nothing else
+# is written.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+rounds=${1:-5}
+dataset=${2:-../shared/datasets/uav123_10fps_dev}
+case "$rounds" in
+  '' | *[!0-9]* | 0) echo "speed-rounds: ROUNDS must be a positive integer, got '$rounds'" >&2; exit 2 ;;
+esac
+if [ "$rounds" -gt 100 ]; then
+  echo "speed-rounds: at most 100 rounds (about 1 minute each), got $rounds" >&2
+  exit 2
+fi
+if [ ! -f "$dataset/sequences.json" ]; then
+  echo "speed-rounds: no dataset at $dataset (sequences.json missing)" >&2
+  exit 2
+fi
+
+bevt=${BEVT:-}
+if [ -z "$bevt" ]; then
+  cargo build --release -q -p bevt_node --bin bevt
+  bevt=target/release/bevt
+fi
+[ -x "$bevt" ] || { echo "speed-rounds: $bevt is not an executable" >&2; exit 2; }
+
+venv=${PEER_VENV:-target/venv-peers}
+if ! "$venv/bin/python" -c 'import cv2' 2>/dev/null; then
+  echo "speed-rounds: installing the peer's venv in $venv (scripts/requirements-peers.txt)" >&2
+  python3 -m venv "$venv"
+  "$venv/bin/python" -m pip install -q -r scripts/requirements-peers.txt
+fi
+
+mkdir -p target
+out=$(mktemp -d target/speed-rounds.XXXXXX)
+rules_off=(--set track_state.drift_check_frames=0 --set track_state.verify_low_confidence=false)
+
+echo "speed-rounds: $rounds rounds on $dataset, results in $out"
+echo "machine: $(nproc) cores, $(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -n 1)"
+echo "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)$(git diff --quiet 2>/dev/null || echo ' (with uncommitted changes)'), binary $bevt"
+echo "start: $(date -u '+%Y-%m-%d %H:%M:%S UTC'), load $(cut -d' ' -f1-3 /proc/loadavg)"
+
+# Pooled fps of a `bevt eval` log (its OVERALL line), or of the peer's last line.
+bevt_fps() { sed -n 's/.*pooled fps \([0-9.]*\).*/\1/p' "$1" | tail -n 1; }
+peer_fps() { sed -n 's/.*pooled \([0-9.]*\) fps.*/\1/p' "$1" | tail -n 1; }
+must() { [ -n "$1" ] || { echo "speed-rounds: no pooled fps in $2" >&2; exit 1; }; }
+
+printf '%-6s %10s %10s %13s %s\n' round default rules_off TrackerNano "verifier passes (default)"
+for r in $(seq 1 "$rounds"); do
+  "$bevt" eval --dataset "$dataset" --out "$out/default_$r" --threads 1 >"$out/default_$r.log" 2>&1
+  "$bevt" eval --dataset "$dataset" --out "$out/rules_off_$r" --threads 1 "${rules_off[@]}" \
+    >"$out/rules_off_$r.log" 2>&1
+  "$venv/bin/python" scripts/nanotrack_peer.py "$dataset" "$out/nano_$r" >"$out/nano_$r.log" 2>&1
+  d=$(bevt_fps "$out/default_$r.log"); must "$d" "$out/default_$r.log"
+  o=$(bevt_fps "$out/rules_off_$r.log"); must "$o" "$out/rules_off_$r.log"
+  n=$(peer_fps "$out/nano_$r.log"); must "$n" "$out/nano_$r.log"
+  passes=$(sed -n 's/.*; \([0-9]*\) verifier passes).*/\1/p' "$out/default_$r.log" | tail -n 1)
+  printf '%-6s %10s %10s %13s %s\n' "$r" "$d" "$o" "$n" "${passes:-?}"
+  echo "$d $o $n" >>"$out/fps.txt"
+done
+echo "end: $(date -u '+%Y-%m-%d %H:%M:%S UTC'), load $(cut -d' ' -f1-3 /proc/loadavg)"
+# Means over the rounds, and the per-round ratios (each round's runs ran minutes apart at most):
+# their median and range show how much the VM's drift moves the ratio of the means.
+awk '
+  function median(a, k,    i, j, t) {
+    for (i = 2; i <= k; i++) for (j = i; j > 1 && a[j - 1] > a[j]; j--) { t = a[j]; a[j] = a[j - 1]; a[j - 1] = t }
+    return k % 2 ? a[(k + 1) / 2] : (a[k / 2] + a[k / 2 + 1]) / 2
+  }
+  { d += $1; o += $2; n += $3; k++; rn[k] = $1 / $3; ro[k] = $2 / $3; rc[k] = 100 * (1 - $1 / $2)
+    lo1 = (k == 1 || rn[k] < lo1) ? rn[k] : lo1; hi1 = (k == 1 || rn[k] > hi1) ? rn[k] : hi1
+    lo3 = (k == 1 || rc[k] < lo3) ? rc[k] : lo3; hi3 = (k == 1 || rc[k] > hi3) ? rc[k] : hi3 }
+  END {
+    d /= k; o /= k; n /= k
+    printf "mean   %10.1f %10.1f %13.1f\n", d, o, n
+    printf "default against TrackerNano: %.2fx of the means; per round median %.2fx, %.2f-%.2fx (issue 19: >= 1.0x)\n", d / n, median(rn, k), lo1, hi1
+    printf "without the drift rules against TrackerNano: %.2fx of the means; per round median %.2fx\n", o / n, median(ro, k)
+    printf "the drift rules cost: %.1f %% of the means; per round median %.1f %%, %.1f to %.1f %% (issue 20: <= 10 %%)\n", 100 * (1 - d / o), median(rc, k), lo3, hi3
+  }' "$out/fps.txt"
