@@ -14,7 +14,8 @@ scripts/speed-rounds.sh runs it in turn with `bevt eval` (its own venv under tar
 scripts/python-env.sh):
     python3 -m venv target/venv-peers
     target/venv-peers/bin/python -m pip install -r scripts/requirements-peers.txt
-    target/venv-peers/bin/python scripts/nanotrack_peer.py [DATASET] [OUT] [MODELS]
+    target/venv-peers/bin/python scripts/nanotrack_peer.py [--sequences a,b] [DATASET] [OUT] [MODELS]
+`--sequences` runs only the named sequences of the manifest (all by default).
 """
 import json
 import math
@@ -43,12 +44,27 @@ def read_boxes(path):
 def main():
     here = os.path.dirname(os.path.abspath(__file__))
     root = os.path.dirname(here)
+    args = sys.argv[1:]
+    only = None
+    if "--sequences" in args:
+        i = args.index("--sequences")
+        if i + 1 >= len(args):
+            raise SystemExit("--sequences needs a comma-separated list of sequence names")
+        only = [n for n in args[i + 1].split(",") if n]
+        del args[i:i + 2]
+    sys.argv[1:] = args
     dataset = sys.argv[1] if len(sys.argv) > 1 else os.path.join(root, "../shared/datasets/uav123_10fps_dev")
     out = sys.argv[2] if len(sys.argv) > 2 else os.path.join(root, "results/nanotrack_peer")
     models = sys.argv[3] if len(sys.argv) > 3 else os.path.join(root, "../shared/models/nanotrack")
     os.makedirs(out, exist_ok=True)
     cv2.setNumThreads(1)
     manifest = json.load(open(os.path.join(dataset, "sequences.json")))
+    if only is not None:
+        known = {seq["name"] for seq in manifest["sequences"]}
+        unknown = [n for n in only if n not in known]
+        if unknown or not only:
+            raise SystemExit(f"--sequences: not in the manifest: {unknown or '(empty list)'}")
+        manifest["sequences"] = [seq for seq in manifest["sequences"] if seq["name"] in only]
     p = cv2.TrackerNano_Params()
     p.backbone = os.path.join(models, "nanotrackv2_backbone_sim.onnx")
     p.neckhead = os.path.join(models, "nanotrackv2_head_sim.onnx")

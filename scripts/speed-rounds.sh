@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Back-to-back speed rounds on the dev set, one thread each: the default, the default without
-# the drift rules, and OpenCV TrackerNano (scripts/nanotrack_peer.py, NanoTrack v2), in turn,
-# ROUNDS times. Prints every round's pooled fps (frames / tracking time, decoding excluded for
+# the drift rules, and OpenCV TrackerNano (scripts/nanotrack_peer.py, NanoTrack v2), taking
+# turns sequence by sequence, ROUNDS times. Prints every round's pooled fps (frames / tracking time, decoding excluded for
 # all three), the means, the default against TrackerNano (issue 19 asks >= 1.0x) and what the
 # drift rules cost (issue 20 allows 10 %). These VMs drift by 10-20 % within minutes, so only
 # figures of one run are compared with each other; docs/benchmarks.md quotes this script's.
@@ -55,22 +55,55 @@ echo "machine: $(nproc) cores, $(lscpu 2>/dev/null | sed -n 's/^Model name: *//p
 echo "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)$(git diff --quiet 2>/dev/null || echo ' (with uncommitted changes)'), binary $bevt"
 echo "start: $(date -u '+%Y-%m-%d %H:%M:%S UTC'), load $(cut -d' ' -f1-3 /proc/loadavg)"
 
-# Pooled fps of a `bevt eval` log (its OVERALL line), or of the peer's last line.
-bevt_fps() { sed -n 's/.*pooled fps \([0-9.]*\).*/\1/p' "$1" | tail -n 1; }
-peer_fps() { sed -n 's/.*pooled \([0-9.]*\) fps.*/\1/p' "$1" | tail -n 1; }
-must() { [ -n "$1" ] || { echo "speed-rounds: no pooled fps in $2" >&2; exit 1; }; }
+# The tracking seconds and frames of one run: bevt's summary.json (frames / fps per sequence),
+# the peer's timing.json (track_s).
+seconds() {
+  "$venv/bin/python" - "$1" "$2" <<'PY'
+import json, sys
+kind, d = sys.argv[1], sys.argv[2]
+if kind == "bevt":
+    s = json.load(open(f"{d}/summary.json"))["sequences"]
+    print(sum(q["frames"] for q in s), sum(q["frames"] / q["fps"] for q in s))
+else:
+    s = json.load(open(f"{d}/timing.json"))["sequences"].values()
+    print(sum(q["frames"] for q in s), sum(q["track_s"] for q in s))
+PY
+}
+sequences=$("$venv/bin/python" -c 'import json, sys; print(" ".join(s["name"] for s in json.load(open(sys.argv[1]))["sequences"]))' "$dataset/sequences.json")
 
-printf '%-6s %10s %10s %13s %s\n' round default rules_off TrackerNano "verifier passes (default)"
+# One run of `which` on sequence `seq`, appending "which frames seconds" to the round's file.
+run() {
+  local which=$1 seq=$2 dir="$out/r${r}_$1_$2"
+  case "$which" in
+    default) "$bevt" eval --dataset "$dataset" --out "$dir" --threads 1 --sequences "$seq" >"$dir.log" 2>&1 ;;
+    rules_off) "$bevt" eval --dataset "$dataset" --out "$dir" --threads 1 --sequences "$seq" "${rules_off[@]}" >"$dir.log" 2>&1 ;;
+    nano) "$venv/bin/python" scripts/nanotrack_peer.py --sequences "$seq" "$dataset" "$dir" >"$dir.log" 2>&1 ;;
+  esac || { echo "speed-rounds: $which on $seq failed, see $dir.log" >&2; exit 1; }
+  local kind=bevt
+  [ "$which" = nano ] && kind=peer
+  echo "$which $(seconds "$kind" "$dir")" >>"$out/round_$r.txt"
+}
+
+# The three trackers take turns sequence by sequence (in a rotating order), so a change of the
+# VM's speed, which comes over tens of seconds, falls on all three alike; a round's pooled fps is
+# its frames over its tracking seconds, over every sequence.
+printf '%-6s %10s %10s %13s\n' round default rules_off TrackerNano
 for r in $(seq 1 "$rounds"); do
-  "$bevt" eval --dataset "$dataset" --out "$out/default_$r" --threads 1 >"$out/default_$r.log" 2>&1
-  "$bevt" eval --dataset "$dataset" --out "$out/rules_off_$r" --threads 1 "${rules_off[@]}" \
-    >"$out/rules_off_$r.log" 2>&1
-  "$venv/bin/python" scripts/nanotrack_peer.py "$dataset" "$out/nano_$r" >"$out/nano_$r.log" 2>&1
-  d=$(bevt_fps "$out/default_$r.log"); must "$d" "$out/default_$r.log"
-  o=$(bevt_fps "$out/rules_off_$r.log"); must "$o" "$out/rules_off_$r.log"
-  n=$(peer_fps "$out/nano_$r.log"); must "$n" "$out/nano_$r.log"
-  passes=$(sed -n 's/.*; \([0-9]*\) verifier passes).*/\1/p' "$out/default_$r.log" | tail -n 1)
-  printf '%-6s %10s %10s %13s %s\n' "$r" "$d" "$o" "$n" "${passes:-?}"
+  i=0
+  for seq in $sequences; do
+    case $((i % 3)) in
+      0) order="default rules_off nano" ;;
+      1) order="rules_off nano default" ;;
+      *) order="nano default rules_off" ;;
+    esac
+    for which in $order; do run "$which" "$seq"; done
+    i=$((i + 1))
+  done
+  line=$(awk '{ f[$1] += $2; t[$1] += $3 }
+    END { printf "%.1f %.1f %.1f", f["default"] / t["default"], f["rules_off"] / t["rules_off"], f["nano"] / t["nano"] }' \
+    "$out/round_$r.txt")
+  read -r d o n <<<"$line"
+  printf '%-6s %10s %10s %13s\n' "$r" "$d" "$o" "$n"
   echo "$d $o $n" >>"$out/fps.txt"
 done
 echo "end: $(date -u '+%Y-%m-%d %H:%M:%S UTC'), load $(cut -d' ' -f1-3 /proc/loadavg)"
