@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # Back-to-back speed rounds on the dev set, one thread each: the default, the default without
 # the drift rules, and OpenCV TrackerNano (scripts/nanotrack_peer.py, NanoTrack v2), taking
-# turns sequence by sequence, ROUNDS times. Prints every round's pooled fps (frames / tracking time, decoding excluded for
-# all three), the means, the default against TrackerNano (issue 19 asks >= 1.0x) and what the
-# drift rules cost (issue 20 allows 10 %). These VMs drift by 10-20 % within minutes, so only
-# figures of one run are compared with each other; docs/benchmarks.md quotes this script's.
+# turns sequence by sequence, ROUNDS times. Prints every round's pooled fps (frames / tracking
+# time, decoding excluded for all three), the means, the default against TrackerNano (issue 19
+# asks >= 1.0x) and what the drift rules cost (issue 20 allows 10 %). These VMs' speed changes
+# by tens of percent within seconds, hence the turns by sequence, and only figures of one run
+# are compared with each other; docs/benchmarks.md quotes this script's.
 #
 # Usage: scripts/speed-rounds.sh [ROUNDS] [DATASET]
 #   ROUNDS   rounds of the three runs (default 5)
