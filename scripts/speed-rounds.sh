@@ -14,6 +14,8 @@
 #   BEVT       the bevt binary (default target/release/bevt, built by cargo when missing)
 #   PEER_VENV  venv with scripts/requirements-peers.txt (default target/venv-peers, created
 #              when it cannot import cv2; the project's .venv belongs to scripts/python-env.sh)
+#   BEVT_ARGS  more `bevt eval` arguments for both of our runs, split at spaces (e.g.
+#              "--set redetection.verifier_filter_hint=true": an option with and without the rules)
 # Boxes and logs of every run stay in a new directory under target/ (printed); nothing else
 # is written.
 set -euo pipefail
@@ -50,11 +52,13 @@ fi
 mkdir -p target
 out=$(mktemp -d target/speed-rounds.XXXXXX)
 rules_off=(--set track_state.drift_check_frames=0 --set track_state.verify_low_confidence=false)
+read -r -a extra <<<"${BEVT_ARGS:-}"
 
 echo "speed-rounds: $rounds rounds on $dataset, results in $out"
 echo "machine: $(nproc) cores, $(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -n 1)"
 echo "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)$(git diff --quiet 2>/dev/null || echo ' (with uncommitted changes)'), binary $bevt"
 echo "start: $(date -u '+%Y-%m-%d %H:%M:%S UTC'), load $(cut -d' ' -f1-3 /proc/loadavg)"
+[ -z "${BEVT_ARGS:-}" ] || echo "our runs with: $BEVT_ARGS"
 
 # The tracking seconds and frames of one run: bevt's summary.json (frames / fps per sequence),
 # the peer's timing.json (track_s).
@@ -76,8 +80,10 @@ sequences=$("$venv/bin/python" -c 'import json, sys; print(" ".join(s["name"] fo
 run() {
   local which=$1 seq=$2 dir="$out/r${r}_$1_$2"
   case "$which" in
-    default) "$bevt" eval --dataset "$dataset" --out "$dir" --threads 1 --sequences "$seq" >"$dir.log" 2>&1 ;;
-    rules_off) "$bevt" eval --dataset "$dataset" --out "$dir" --threads 1 --sequences "$seq" "${rules_off[@]}" >"$dir.log" 2>&1 ;;
+    default) "$bevt" eval --dataset "$dataset" --out "$dir" --threads 1 --sequences "$seq" \
+      ${extra[@]+"${extra[@]}"} >"$dir.log" 2>&1 ;;
+    rules_off) "$bevt" eval --dataset "$dataset" --out "$dir" --threads 1 --sequences "$seq" \
+      ${extra[@]+"${extra[@]}"} "${rules_off[@]}" >"$dir.log" 2>&1 ;;
     nano) "$venv/bin/python" scripts/nanotrack_peer.py --sequences "$seq" "$dataset" "$dir" >"$dir.log" 2>&1 ;;
   esac || { echo "speed-rounds: $which on $seq failed, see $dir.log" >&2; exit 1; }
   local kind=bevt
