@@ -26,8 +26,6 @@ import time
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import cv2  # noqa: E402
-
 
 def read_boxes(path):
     boxes = []
@@ -56,8 +54,6 @@ def main():
     dataset = sys.argv[1] if len(sys.argv) > 1 else os.path.join(root, "../shared/datasets/uav123_10fps_dev")
     out = sys.argv[2] if len(sys.argv) > 2 else os.path.join(root, "results/nanotrack_peer")
     models = sys.argv[3] if len(sys.argv) > 3 else os.path.join(root, "../shared/models/nanotrack")
-    os.makedirs(out, exist_ok=True)
-    cv2.setNumThreads(1)
     manifest = json.load(open(os.path.join(dataset, "sequences.json")))
     if only is not None:
         known = {seq["name"] for seq in manifest["sequences"]}
@@ -65,6 +61,11 @@ def main():
         if unknown or not only:
             raise SystemExit(f"--sequences: not in the manifest: {unknown or '(empty list)'}")
         manifest["sequences"] = [seq for seq in manifest["sequences"] if seq["name"] in only]
+    # Arguments checked before opencv is loaded or anything is written.
+    import cv2
+
+    os.makedirs(out, exist_ok=True)
+    cv2.setNumThreads(1)
     p = cv2.TrackerNano_Params()
     p.backbone = os.path.join(models, "nanotrackv2_backbone_sim.onnx")
     p.neckhead = os.path.join(models, "nanotrackv2_head_sim.onnx")

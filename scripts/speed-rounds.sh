@@ -68,6 +68,9 @@ import json, sys
 kind, d = sys.argv[1], sys.argv[2]
 if kind == "bevt":
     s = json.load(open(f"{d}/summary.json"))["sequences"]
+    bad = [q["name"] for q in s if q.get("status") != "ok" or not q.get("fps")]
+    if bad:
+        sys.exit(f"speed-rounds: {d}: sequence(s) {bad} did not track (see its log)")
     print(sum(q["frames"] for q in s), sum(q["frames"] / q["fps"] for q in s))
 else:
     s = json.load(open(f"{d}/timing.json"))["sequences"].values()
@@ -92,7 +95,7 @@ run() {
 }
 
 # The three trackers take turns sequence by sequence (in a rotating order), so a change of the
-# VM's speed, which comes over tens of seconds, falls on all three alike; a round's pooled fps is
+# VM's speed falls on all three alike unless it comes within one sequence's few seconds; a round's pooled fps is
 # its frames over its tracking seconds, over every sequence.
 printf '%-6s %10s %10s %13s\n' round default rules_off TrackerNano
 for r in $(seq 1 "$rounds"); do

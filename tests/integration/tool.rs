@@ -424,3 +424,78 @@ fn select_chooses_on_the_other_sequences_and_refuses_bad_folders() {
     );
     assert!(Criterion::parse("iou").is_err());
 }
+
+/// `scripts/speed-rounds.sh` and `scripts/nanotrack_peer.py` (the speed measurement of issues
+/// 19 and 20) refuse bad arguments with a clear message before they build, install, load
+/// opencv or write anything.
+#[test]
+fn the_speed_scripts_refuse_bad_arguments_before_any_work() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+    let tmp = temp_dir("speed_scripts");
+    write_dataset(&tmp);
+    let rounds_dirs = || {
+        std::fs::read_dir(root.join("target"))
+            .map(|d| {
+                d.filter_map(Result::ok)
+                    .filter(|e| e.file_name().to_string_lossy().starts_with("speed-rounds."))
+                    .count()
+            })
+            .unwrap_or(0)
+    };
+    let before = rounds_dirs();
+    let data = tmp.to_str().unwrap();
+    let missing = tmp.join("no_such_dataset");
+    for (args, says) in [
+        (vec!["0"], "ROUNDS must be a positive integer, got '0'"),
+        (
+            vec!["five"],
+            "ROUNDS must be a positive integer, got 'five'",
+        ),
+        (vec!["-3"], "ROUNDS must be a positive integer"),
+        (vec!["101"], "at most 100 rounds"),
+        (
+            vec!["2", missing.to_str().unwrap()],
+            "sequences.json missing",
+        ),
+    ] {
+        let out = std::process::Command::new("bash")
+            .arg(root.join("scripts/speed-rounds.sh"))
+            .args(&args)
+            // Were an argument let through, the run would stop at once on this binary
+            // (another message) instead of building and measuring for an hour.
+            .env("BEVT", tmp.join("no_such_bevt"))
+            .output()
+            .expect("bash runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+    assert_eq!(
+        rounds_dirs(),
+        before,
+        "a refused run left a results directory"
+    );
+    // The peer: checked against the manifest before opencv is imported (the test's python3
+    // need not have it) and before its output folder exists.
+    let out_dir = tmp.join("peer_out");
+    for (args, says) in [
+        (
+            vec!["--sequences", "good,nope"],
+            "not in the manifest: ['nope']",
+        ),
+        (vec!["--sequences", ","], "(empty list)"),
+        (vec!["--sequences"], "needs a comma-separated list"),
+    ] {
+        let mut cmd = std::process::Command::new("python3");
+        cmd.arg(root.join("scripts/nanotrack_peer.py")).args(&args);
+        if args.len() > 1 {
+            cmd.args([data, out_dir.to_str().unwrap()]);
+        }
+        let out = cmd.output().expect("python3 runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(err.contains(says), "{args:?}: {err}");
+        assert!(!out_dir.exists(), "{args:?} created the output folder");
+    }
+    let _ = std::fs::remove_dir_all(&tmp);
+}
