@@ -588,6 +588,45 @@ impl Default for BoxRefineConfig {
     }
 }
 
+/// Camera motion compensation (see [`crate::motion`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MotionConfig {
+    /// Centre each frame's search where the scene's shift since the previous frame (phase
+    /// correlation of coarse whole frames) and the target's own motion put the target.
+    pub camera: bool,
+    /// Phase-correlation peak (0–1) a scene shift needs to be used; below it the frame's
+    /// shift is taken as none.
+    pub min_peak: f32,
+    /// How the target's own motion in the scene is estimated.
+    pub own: OwnMotion,
+    /// Running-mean rate of the own motion, per frame (0: none).
+    pub own_rate: f32,
+}
+
+/// How [`crate::motion`] estimates the target's own motion in the scene.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OwnMotion {
+    /// The camera's smooth motion reversed (a camera that follows the target); only the
+    /// camera's jerks move the search.
+    #[default]
+    Camera,
+    /// What the tracker measured on confident frames, less the scene's shift.
+    Tracker,
+}
+
+impl Default for MotionConfig {
+    fn default() -> Self {
+        Self {
+            camera: false,
+            min_peak: 0.1,
+            own: OwnMotion::Camera,
+            own_rate: 0.3,
+        }
+    }
+}
+
 /// Everything the tracker can be told. See `config/bevt.yaml` for the annotated defaults.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -614,6 +653,8 @@ pub struct TrackerConfig {
     pub redetection: RedetectionConfig,
     /// The learned box on the filter.
     pub box_refine: BoxRefineConfig,
+    /// Camera motion compensation.
+    pub motion: MotionConfig,
     /// Worker threads for the per-scale work of one frame (1 = sequential). Work runs on
     /// the caller's rayon pool; the core spawns no threads itself.
     pub threads: usize,
@@ -633,6 +674,7 @@ impl Default for TrackerConfig {
             track_state: TrackStateConfig::default(),
             redetection: RedetectionConfig::default(),
             box_refine: BoxRefineConfig::default(),
+            motion: MotionConfig::default(),
             threads: 1,
         }
     }
@@ -881,6 +923,8 @@ impl TrackerConfig {
         float_key("box_refine.min_iou", b.min_iou)?;
         float_key("box_refine.max_change", b.max_change)?;
         int_key("box_refine.interval", b.interval)?;
+        float_key("motion.min_peak", self.motion.min_peak)?;
+        float_key("motion.own_rate", self.motion.own_rate)?;
         int_key("threads", self.threads)?;
         Ok(TrackerSpec {
             config: self.clone(),

@@ -37,7 +37,7 @@ impl PixelFormat {
     }
 
     /// Byte offsets of red, green and blue within a pixel (all 0 for grey).
-    const fn rgb_offsets(self) -> [usize; 3] {
+    pub(crate) const fn rgb_offsets(self) -> [usize; 3] {
         match self {
             PixelFormat::Rgb8 | PixelFormat::Rgba8 => [0, 1, 2],
             PixelFormat::Bgr8 | PixelFormat::Bgra8 => [2, 1, 0],

@@ -48,6 +48,7 @@ pub mod fft;
 pub mod filter;
 pub mod geometry;
 pub mod image;
+pub mod motion;
 pub mod nn;
 pub mod redetect;
 pub mod scale;

@@ -571,6 +571,15 @@ pub static TRACKER_KEYS: &[KeySpec] = &[
         "Calibrate the head to the initial box: the given box defines the target's extent, and the per-side ratio of it to the head's box on the initial frame (within ×/÷1.5) scales every later head box, removing the head's per-object bias (a building with its surroundings). Needs an initial box whose shorter side is at least `min_side`; otherwise the head's boxes are taken as they are."),
     key("box_refine.interval", Int, int(1, 1000), "frames", FIXED,
         "Run the head every this many tracked frames (1: every frame); between runs the box follows the scale filter with the last correction (the cost bound)."),
+    // motion
+    key("motion.camera", Bool, Range::Any, "", FIXED,
+        "Camera motion compensation: each frame's search is centred where the scene's shift since the previous frame (phase correlation of coarse grey copies of the whole frames) plus the target's own motion in the scene put the target, instead of at its last position. For small targets under camera jerks (a 47 px search window around an 11 × 8 px target). Off by default: under the eval's `shake` it gains 0.07–0.15 AUC on the dev set, unshaken it ties (LOSO) and lowers flags precision 0.948 → 0.571, and it loses under tiny, aspect and look-alike perturbations (docs/results.md \"Camera motion compensation\")."),
+    key("motion.min_peak", Float, closed(0.0, 1.0), "correlation peak", FIXED,
+        "Phase-correlation peak a frame's scene shift needs to be used (1: a pure shift; noise alone peaks near 0.04 on the 128-cell grid); below it the frame's shift is taken as none (texture-poor water or sky, a scene cut)."),
+    key("motion.own", Kind::Choice(&["camera", "tracker"]), Range::Any, "", FIXED,
+        "The target's own motion in the scene: `camera`, the camera's smooth motion reversed (a camera that follows its target; only the camera's jerks move the search, and a static target under a steady pan is searched as without compensation); `tracker`, the running mean of what the tracker measured on confident frames less the scene's shift (any target, but its errors feed the next search)."),
+    key("motion.own_rate", Float, closed(0.0, 1.0), "per frame", FIXED,
+        "Running-mean rate of the own motion (0: none, the search follows the scene's shift alone)."),
     // threads
     key("threads", Int, int(1, 256), "threads", FIXED,
         "Worker threads for the per-scale work of one frame (1 = sequential). Work runs on the caller's rayon pool; the core spawns no threads itself. With the scale filter (the default) there is one patch per frame, so it gains nothing."),
