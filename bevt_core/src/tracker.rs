@@ -1878,8 +1878,8 @@ mod tests {
     #[test]
     fn camera_motion_compensation_keeps_a_small_target_through_camera_jerks() {
         // A 12 × 9 px target (a 50 px search window), the camera drifting and shaken by up
-        // to 20 px each way (a jerk of up to 40 px between frames): the eval's `shake`, the failure of the default on
-        // small targets before `motion.camera` (docs/results.md).
+        // to 20 px each way (jerks of up to 40 px between frames): the eval's `shake`, where
+        // the default loses small targets (docs/results.md "Camera motion compensation").
         let seq = SynthParams {
             width: 480,
             height: 320,
