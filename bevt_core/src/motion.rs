@@ -30,6 +30,7 @@
 
 use crate::config::{MotionConfig, OwnMotion};
 use crate::fft::{signed_freq, Fft2};
+use crate::filter::label::hann2d;
 use crate::geometry::{GridSize, Point2};
 use crate::image::Frame;
 use rustfft::num_complex::Complex32;
@@ -77,18 +78,7 @@ impl SceneShift {
             h: (height / step).max(2),
             w: (width / step).max(2),
         };
-        let hann = |n: usize| -> Vec<f32> {
-            (0..n)
-                .map(|i| {
-                    0.5 - 0.5 * (2.0 * std::f32::consts::PI * (i as f32 + 0.5) / n as f32).cos()
-                })
-                .collect()
-        };
-        let (wy, wx) = (hann(grid.h), hann(grid.w));
-        let window = wy
-            .iter()
-            .flat_map(|a| wx.iter().map(move |b| a * b))
-            .collect();
+        let window = hann2d(grid);
         let fft = Fft2::new(grid);
         let n = fft.spectrum_len();
         Self {
@@ -104,11 +94,6 @@ impl SceneShift {
             corr: vec![0.0; grid.len()],
             has_prev: false,
         }
-    }
-
-    /// The coarse grid (rows, columns).
-    pub fn grid(&self) -> GridSize {
-        self.grid
     }
 
     /// Forgets the previous frame and takes `frame` as the first.
@@ -280,11 +265,6 @@ impl Motion {
         self.shift = s.map_or(Point2::default(), |s| s.d);
         self.trusted = s.is_some();
         s
-    }
-
-    /// This frame's trusted scene shift (zero when none).
-    pub fn shift(&self) -> Point2 {
-        self.shift
     }
 
     /// Where to search for a target last at `pos`: moved by the scene's shift and the own
