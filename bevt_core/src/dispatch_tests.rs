@@ -2,6 +2,8 @@
 //! docs/benchmarks.md) give pinned bits on fixed input: on a CPU with AVX2 the clones run,
 //! on one without (or under `qemu-x86_64 -cpu Nehalem`) the baseline versions do, and
 //! both must give the same bits, the claim that lets the clones leave every box unchanged.
+//! `nn`'s matrix product also has an AVX-512 kernel (pulp's `x86::V4`) for whole blocks of
+//! 16 columns: on a CPU with AVX-512 its bits are the ones pinned below for the product.
 //! x86-64 only: other architectures compile the baseline versions alone.
 
 use crate::features::hog::Hog;
@@ -127,5 +129,10 @@ const PINNED: [u64; 8] = [
 fn the_cloned_kernels_give_the_pinned_bits_with_and_without_avx2() {
     let avx2 =
         std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma");
-    assert_eq!(kernel_bits(), PINNED, "AVX2 + FMA clones running: {avx2}");
+    let avx512 = std::arch::is_x86_feature_detected!("avx512f");
+    assert_eq!(
+        kernel_bits(),
+        PINNED,
+        "AVX2 + FMA clones running: {avx2}, AVX-512 product kernel: {avx512}"
+    );
 }
