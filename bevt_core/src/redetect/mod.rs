@@ -595,6 +595,13 @@ impl CandidateTracker {
         self.current
     }
 
+    /// Moves the current candidate's position by `f` (the scene moved under the camera).
+    pub fn move_by(&mut self, f: impl Fn(Point2) -> Point2) {
+        if let Some(c) = self.current.as_mut() {
+            c.pos = f(c.pos);
+        }
+    }
+
     /// Forgets any candidate.
     pub fn clear(&mut self) {
         self.current = None;

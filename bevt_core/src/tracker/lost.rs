@@ -128,6 +128,13 @@ pub(super) fn start(st: &mut State, frame: &Frame<'_>) {
     st.lost.verified.saved = false;
 }
 
+/// The lost search's candidates (the filter's and the verifier's) moved by `f`: the scene
+/// moved under the camera since the previous frame (`motion.camera`).
+pub(super) fn move_with_scene(st: &mut State, f: impl Fn(Point2) -> Point2) {
+    st.lost.candidates.move_by(&f);
+    st.lost.vcand.move_by(&f);
+}
+
 /// A drift check agreed with the box on this (confident, not yet learned) frame: the
 /// model and the re-detection template are the target's, and are what a loss on drift
 /// goes back to.
