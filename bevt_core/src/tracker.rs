@@ -1870,7 +1870,13 @@ mod tests {
     }
 
     /// IoUs of frames 1.. of `seq` under the eval perturbation `spec` (the camera shaken).
-    fn perturbed_ious(seq: &SynthParams, cfg: &TrackerConfig, spec: &str) -> Vec<f32> {
+    /// Each frame's output after the first on `seq` under the perturbation `spec`, beside
+    /// the perturbed true box (`None` where the perturbation drops it).
+    fn perturbed_run(
+        seq: &SynthParams,
+        cfg: &TrackerConfig,
+        spec: &str,
+    ) -> Vec<(TrackOutput, Option<BBox>)> {
         use crate::eval::perturb::Perturbation;
         let p = Perturbation::parse(spec).unwrap().for_sequence("synth");
         let (w, h) = (seq.width, seq.height);
@@ -1891,8 +1897,16 @@ mod tests {
                 let o = t
                     .update(&Frame::packed(&rgb, w, h, PixelFormat::Rgb8).unwrap())
                     .unwrap();
-                truth.map_or(0.0, |b| o.bbox.iou(&b))
+                (o, truth)
             })
+            .collect()
+    }
+
+    /// Each frame's IoU after the first (0 where the truth is dropped).
+    fn perturbed_ious(seq: &SynthParams, cfg: &TrackerConfig, spec: &str) -> Vec<f32> {
+        perturbed_run(seq, cfg, spec)
+            .iter()
+            .map(|(o, truth)| truth.map_or(0.0, |b| o.bbox.iou(&b)))
             .collect()
     }
 
@@ -1940,41 +1954,29 @@ mod tests {
         assert!(a >= 0.9 && b >= 0.9, "unshaken: {a} with, {b} without");
     }
 
-    /// The first frame from `from` on that is tracked with IoU ≥ 0.3 on `seq` under `spec`,
-    /// and how many frames were lost.
+    /// The first frame from `from` on that is tracked with IoU ≥ 0.3 on `seq` under `spec`
+    /// (`seq.frames` if none), and how many frames were lost.
     fn reacquired_at(
         seq: &SynthParams,
         cfg: &TrackerConfig,
         spec: &str,
         from: usize,
     ) -> (usize, usize) {
-        use crate::eval::perturb::Perturbation;
-        let p = Perturbation::parse(spec).unwrap().for_sequence("synth");
-        let (w, h) = (seq.width, seq.height);
-        let frame_at = |i: usize| {
-            let f = seq.frame(i);
-            let (rgb, _, _) = p.apply_frame(i, f.rgb, w, h).unwrap();
-            (rgb, p.apply_box(i, w, h, f.truth).unwrap())
-        };
-        let (rgb0, truth0) = frame_at(0);
-        let mut t = BevtTracker::new(cfg.validate().unwrap());
-        t.init(
-            &Frame::packed(&rgb0, w, h, PixelFormat::Rgb8).unwrap(),
-            truth0.unwrap(),
-        )
-        .unwrap();
-        let (mut at, mut lost) = (seq.frames, 0);
-        for i in 1..seq.frames {
-            let (rgb, truth) = frame_at(i);
-            let o = t
-                .update(&Frame::packed(&rgb, w, h, PixelFormat::Rgb8).unwrap())
-                .unwrap();
-            lost += usize::from(o.state == TrackState::Lost);
-            let good = truth.is_some_and(|b| o.bbox.iou(&b) >= 0.3);
-            if i >= from && at == seq.frames && o.state == TrackState::Tracking && good {
-                at = i;
-            }
-        }
+        let run = perturbed_run(seq, cfg, spec);
+        let lost = run
+            .iter()
+            .filter(|(o, _)| o.state == TrackState::Lost)
+            .count();
+        let at = run
+            .iter()
+            .enumerate()
+            .map(|(i, r)| (i + 1, r))
+            .find(|(i, (o, truth))| {
+                *i >= from
+                    && o.state == TrackState::Tracking
+                    && truth.is_some_and(|b| o.bbox.iou(&b) >= 0.3)
+            })
+            .map_or(seq.frames, |(i, _)| i);
         (at, lost)
     }
 
