@@ -602,6 +602,9 @@ pub struct MotionConfig {
     pub own: OwnMotion,
     /// Running-mean rate of the own motion, per frame (0: none).
     pub own_rate: f32,
+    /// A tracked frame's search moves only when the prediction moves it by at least this
+    /// fraction of the search window's side (0: always).
+    pub min_move: f32,
 }
 
 /// How [`crate::motion`] estimates the target's own motion in the scene.
@@ -623,6 +626,7 @@ impl Default for MotionConfig {
             min_peak: 0.1,
             own: OwnMotion::Camera,
             own_rate: 0.3,
+            min_move: 0.0,
         }
     }
 }
@@ -925,6 +929,7 @@ impl TrackerConfig {
         int_key("box_refine.interval", b.interval)?;
         float_key("motion.min_peak", self.motion.min_peak)?;
         float_key("motion.own_rate", self.motion.own_rate)?;
+        float_key("motion.min_move", self.motion.min_move)?;
         int_key("threads", self.threads)?;
         Ok(TrackerSpec {
             config: self.clone(),

@@ -348,6 +348,7 @@ mod tests {
             min_peak: 0.1,
             own,
             own_rate: 0.3,
+            min_move: 0.0,
         }
     }
 

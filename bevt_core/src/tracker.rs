@@ -992,7 +992,10 @@ impl Tracker for BevtTracker {
         let last_pos = st.pos;
         if let Some(m) = st.motion.as_ref() {
             let p = m.predict(st.pos);
-            if p.x.is_finite() && p.y.is_finite() {
+            // Moves the filter reaches by itself are left to it (`min_move`).
+            let reach = cfg.motion.min_move * st.geo.patch_side as f32 * st.scale;
+            let far = p.distance(&st.pos) >= reach;
+            if far && p.x.is_finite() && p.y.is_finite() {
                 st.pos = Point2 {
                     x: p.x.clamp(0.0, st.frame_w as f32),
                     y: p.y.clamp(0.0, st.frame_h as f32),
@@ -1946,6 +1949,15 @@ mod tests {
                 "{spec} without: {b} (with: {a}); the scene no longer tests it"
             );
         }
+        // `min_move` at a whole window side leaves the tracked frames' search where it was
+        // (the jerks, up to 40 px, are under the 50 px window): the gain is gone.
+        let mut gated = on.clone();
+        gated.motion.min_move = 1.0;
+        let (a, g) = (
+            held(&perturbed_ious(&seq, &on, "shake=20,seed=1")),
+            held(&perturbed_ious(&seq, &gated, "shake=20,seed=1")),
+        );
+        assert!(g < a - 0.2, "min_move 1: {g} held, {a} without the gate");
         // Unshaken, compensation changes little.
         let (a, b) = (
             held(&perturbed_ious(&seq, &on, "seed=3")),
