@@ -1872,8 +1872,7 @@ mod tests {
         }
     }
 
-    /// IoUs of frames 1.. of `seq` under the eval perturbation `spec` (the camera shaken).
-    /// Each frame's output after the first on `seq` under the perturbation `spec`, beside
+    /// Each frame's output after the first on `seq` under the eval perturbation `spec`, beside
     /// the perturbed true box (`None` where the perturbation drops it).
     fn perturbed_run(
         seq: &SynthParams,
