@@ -441,6 +441,35 @@ pub struct RedetectionConfig {
     /// Off by default: it re-acquires sooner with fewer passes, but the states flag the
     /// failures that remain less precisely (docs/states.md).
     pub verifier_filter_hint: bool,
+    /// Whether the frozen filter sweeps the frame (whole-frame proposals and the tile walk,
+    /// within `windows_per_frame`) while lost, or only follows the last position and its
+    /// candidate: `auto` sweeps only when no verifier searches (`verifier: none`) or the
+    /// verifier asks for the filter's hint (`verifier_filter_hint`); `always` sweeps beside
+    /// the verifier too.
+    pub filter_search: FilterSearch,
+}
+
+/// Whether the frozen filter sweeps the frame while lost (`redetection.filter_search`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FilterSearch {
+    /// The filter sweeps only when no verifier does (or the verifier takes its hint); with
+    /// a verifier it evaluates the last position and its candidate: two windows at most.
+    #[default]
+    Auto,
+    /// The filter sweeps beside the verifier (up to `windows_per_frame` windows a frame).
+    Always,
+}
+
+impl FilterSearch {
+    /// Whether the filter sweeps, given whether a verifier searches the lost frames and
+    /// whether it takes the filter's hint.
+    pub fn sweeps(self, verifier: bool, hint: bool) -> bool {
+        match self {
+            FilterSearch::Always => true,
+            FilterSearch::Auto => !verifier || hint,
+        }
+    }
 }
 
 /// The learned re-detection verifier (`redetection.verifier`).
@@ -477,6 +506,7 @@ impl Default for RedetectionConfig {
             verifier_threshold: 5.0,
             verifier_filter_check: false,
             verifier_filter_hint: false,
+            filter_search: FilterSearch::Auto,
         }
     }
 }

@@ -1616,6 +1616,68 @@ mod tests {
         assert!(with <= BACK + 2 + confirm, "re-acquired at {with}");
     }
 
+    /// `redetection.filter_search`: with a verifier searching the lost frames (`auto`) the
+    /// frozen filter only follows the last position and its candidate, so a target that
+    /// re-enters far away is the verifier's to find; `always` lets the filter's own sweep
+    /// (proposals and tiles) find it as without a verifier. The verifier here never
+    /// recognises the target and the drift rules are off, so only the filter can take the
+    /// track back: it does with `always` (within the 10 frames the filter-only test allows)
+    /// and never with `auto`, while the verifier is asked on every lost frame either way.
+    #[test]
+    fn with_a_verifier_the_filter_sweeps_the_frame_only_when_asked() {
+        const HIDE: usize = 30;
+        const SHOW: usize = 50;
+        let seq = SynthParams {
+            width: 960,
+            height: 540,
+            frames: 90,
+            target: (28.0, 24.0),
+            scale_rate: 1.0,
+            path_amplitude: (30.0, 20.0),
+            camera_velocity: (0.5, -0.3),
+            hidden: Some((HIDE, SHOW)),
+            reappear_offset: (-380.0, 200.0),
+            ..SynthParams::default()
+        };
+        let run = |search: crate::config::FilterSearch| {
+            let mut cfg = TrackerConfig::default();
+            cfg.redetection.filter_search = search;
+            cfg.track_state.drift_check_frames = 0;
+            cfg.track_state.verify_low_confidence = false;
+            let oracle = Oracle::disputing();
+            let calls = Arc::clone(&oracle.calls);
+            let mut t = started_with(&seq, &cfg, Some(Box::new(oracle)));
+            let (mut lost, mut back) = (0, None);
+            for i in 1..seq.frames {
+                let f = seq.frame(i);
+                let frame =
+                    Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+                let o = t.update(&frame).unwrap();
+                lost += usize::from(o.state == TrackState::Lost);
+                if o.state == TrackState::Reacquired && back.is_none() {
+                    assert!(i >= SHOW, "re-acquired at {i} while hidden");
+                    let e = o.bbox.center().distance(&f.truth.center());
+                    assert!(e < 5.0, "frame {i}: centre error {e}");
+                    back = Some(i);
+                }
+            }
+            let passes = calls.load(Ordering::Relaxed);
+            assert!(
+                passes >= lost,
+                "{passes} verifier passes on {lost} lost frames"
+            );
+            back
+        };
+        let always = run(crate::config::FilterSearch::Always);
+        let auto = run(crate::config::FilterSearch::Auto);
+        println!("re-acquired at {always:?} (always), {auto:?} (auto)");
+        assert!(
+            always.is_some_and(|b| b <= SHOW + 10),
+            "the filter's sweep did not take the target back: {always:?}"
+        );
+        assert_eq!(auto, None, "the filter swept with a verifier searching");
+    }
+
     /// The config with the learned box on the filter on (`box_refine.mode: nanotrack`).
     fn refined(cfg: &TrackerConfig) -> TrackerConfig {
         let mut c = cfg.clone();

@@ -444,6 +444,14 @@ pub(super) fn search(
         }
         None => st.lost.candidates.offer(pos, scale, conf, threshold),
     }
+    // The rest of the budget sweeps the frame, unless the verifier does that
+    // (`filter_search`): the window above follows the last position either way.
+    if !p
+        .filter_search
+        .sweeps(verifier.is_some() && p.enabled, p.verifier_filter_hint)
+    {
+        budget = 0;
+    }
     // Whole-frame template-match proposals, at the scale of the loss.
     let side = template_side(st, st.lost.scale_at_loss);
     let wanted = if p.enabled {
