@@ -1202,6 +1202,28 @@ mod tests {
     }
 
     #[test]
+    fn the_filter_sweeps_beside_a_verifier_only_when_asked_or_hinted() {
+        use FilterSearch::{Always, Auto};
+        // (mode, a verifier searches, it takes the filter's hint) → the filter sweeps.
+        for (mode, verifier, hint, sweeps) in [
+            (Auto, true, false, false),
+            (Auto, true, true, true),
+            (Auto, false, false, true),
+            (Auto, false, true, true),
+            (Always, true, false, true),
+            (Always, true, true, true),
+            (Always, false, false, true),
+        ] {
+            assert_eq!(
+                mode.sweeps(verifier, hint),
+                sweeps,
+                "{mode:?}, verifier {verifier}, hint {hint}"
+            );
+        }
+        assert_eq!(RedetectionConfig::default().filter_search, Auto);
+    }
+
+    #[test]
     fn default_config_is_valid() {
         TrackerConfig::default().validate().unwrap();
     }
