@@ -1627,18 +1627,7 @@ mod tests {
     fn with_a_verifier_the_filter_sweeps_the_frame_only_when_asked() {
         const HIDE: usize = 30;
         const SHOW: usize = 50;
-        let seq = SynthParams {
-            width: 960,
-            height: 540,
-            frames: 90,
-            target: (28.0, 24.0),
-            scale_rate: 1.0,
-            path_amplitude: (30.0, 20.0),
-            camera_velocity: (0.5, -0.3),
-            hidden: Some((HIDE, SHOW)),
-            reappear_offset: (-380.0, 200.0),
-            ..SynthParams::default()
-        };
+        let seq = SynthParams::far_reentry(HIDE, SHOW);
         let run = |search: crate::config::FilterSearch| {
             let mut cfg = TrackerConfig::default();
             cfg.redetection.filter_search = search;

@@ -39,16 +39,5 @@ pub fn with_look_alike() -> SynthParams {
 /// A large frame (960×540), a small target (28×24) that leaves the view and re-enters at
 /// the far side (380 px left, 200 px down) after frames 30–49.
 pub fn far_reentry() -> SynthParams {
-    SynthParams {
-        width: 960,
-        height: 540,
-        frames: 90,
-        target: (28.0, 24.0),
-        scale_rate: 1.0,
-        path_amplitude: (30.0, 20.0),
-        camera_velocity: (0.5, -0.3),
-        hidden: Some((HIDE, SHOW)),
-        reappear_offset: (-380.0, 200.0),
-        ..SynthParams::default()
-    }
+    SynthParams::far_reentry(HIDE, SHOW)
 }

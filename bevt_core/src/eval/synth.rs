@@ -108,6 +108,24 @@ fn texture(x: f32, y: f32, seed: u32) -> f32 {
 }
 
 impl SynthParams {
+    /// A large frame (960×540) and a small target (28×24) that leaves the view on frame
+    /// `hide` and re-enters on frame `show` at the far side (380 px left, 200 px down): the
+    /// re-detection scene of the lost-state tests, unit and integration alike.
+    pub fn far_reentry(hide: usize, show: usize) -> Self {
+        Self {
+            width: 960,
+            height: 540,
+            frames: 90,
+            target: (28.0, 24.0),
+            scale_rate: 1.0,
+            path_amplitude: (30.0, 20.0),
+            camera_velocity: (0.5, -0.3),
+            hidden: Some((hide, show)),
+            reappear_offset: (-380.0, 200.0),
+            ..Self::default()
+        }
+    }
+
     /// The true box of frame `t`.
     pub fn truth(&self, t: usize) -> BBox {
         let tf = t as f32;
