@@ -32,7 +32,7 @@ use crate::config::{BoxPrior, BoxRead, BoxRefineConfig, BoxRefineMode, TrackerSp
 use crate::error::TrackError;
 use crate::geometry::{BBox, Point2, Size2};
 use crate::image::Frame;
-use crate::redetect::nano::{NanoVerifier, SEARCH_CELLS, SEARCH_SIDE, TEMPLATE_SIDE};
+use crate::redetect::nano::{NanoVerifier, SEARCH_CELLS, TEMPLATE_SIDE};
 use crate::redetect::{context_side, Verifier};
 
 /// Backbone stride, crop pixels.
@@ -63,9 +63,16 @@ fn change(r: f32) -> f32 {
     r.max(1.0 / r)
 }
 
-/// The 16×16 cosine window NanoTrack adds to its score map (`np.hanning`, outer product).
-pub fn cosine_window() -> Vec<f32> {
-    let n = SEARCH_CELLS;
+/// The side of a square map of `len` grid points when it is one the head gives: even
+/// (so the crop centre is a grid point), 4 to 16.
+fn grid_cells(len: usize) -> Option<usize> {
+    let c = (len as f64).sqrt().round() as usize;
+    (c * c == len && c.is_multiple_of(2) && (4..=SEARCH_CELLS).contains(&c)).then_some(c)
+}
+
+/// The `n × n` cosine window NanoTrack adds to its score map (`np.hanning`, outer product;
+/// NanoTrack's is 16×16).
+pub fn cosine_window(n: usize) -> Vec<f32> {
     let h: Vec<f32> = (0..n)
         .map(|i| 0.5 - 0.5 * (2.0 * std::f32::consts::PI * i as f32 / (n - 1) as f32).cos())
         .collect();
@@ -87,8 +94,9 @@ pub fn select(
     cfg: &BoxRefineConfig,
     window: &[f32],
 ) -> Option<HeadBox> {
-    let n = SEARCH_CELLS * SEARCH_CELLS;
-    if margins.len() != n || loc.len() != 4 * n || window.len() != n {
+    let cells = grid_cells(margins.len())?;
+    let n = cells * cells;
+    if loc.len() != 4 * n || window.len() != n {
         return None;
     }
     if !(prev.w > 0.0 && prev.h > 0.0 && scale_z > 0.0 && scale_z.is_finite()) {
@@ -117,8 +125,8 @@ pub fn select(
     }
     let (i, _, score, penalty) = best?;
     let (l, t, r, b) = (loc[i], loc[n + i], loc[2 * n + i], loc[3 * n + i]);
-    let (j, k) = (i / SEARCH_CELLS, i % SEARCH_CELLS);
-    let half = (SEARCH_CELLS / 2) as f32;
+    let (j, k) = (i / cells, i % cells);
+    let half = (cells / 2) as f32;
     let cx = (k as f32 - half) * STRIDE + 0.5 * (r - l);
     let cy = (j as f32 - half) * STRIDE + 0.5 * (b - t);
     Some(HeadBox {
@@ -155,19 +163,20 @@ pub fn read_at(
     scale_z: f32,
     cfg: &BoxRefineConfig,
 ) -> Option<HeadBox> {
-    let n = SEARCH_CELLS * SEARCH_CELLS;
-    if margins.len() != n || loc.len() != 4 * n {
+    let cells = grid_cells(margins.len())?;
+    let n = cells * cells;
+    if loc.len() != 4 * n {
         return None;
     }
     if !(prior.w > 0.0 && prior.h > 0.0 && scale_z > 0.0 && scale_z.is_finite()) {
         return None;
     }
-    let c = SEARCH_CELLS / 2;
+    let c = cells / 2;
     let (mut wsum, mut psum, mut count) = (0.0f32, 0.0f32, 0usize);
     let mut acc = [0.0f32; 4];
     for j in c - READ_RADIUS..=c + READ_RADIUS {
         for k in c - READ_RADIUS..=c + READ_RADIUS {
-            let i = j * SEARCH_CELLS + k;
+            let i = j * cells + k;
             let (l, t, r, b) = (loc[i], loc[n + i], loc[2 * n + i], loc[3 * n + i]);
             let ok = [l, t, r, b, margins[i]].iter().all(|v| v.is_finite());
             if !(ok && l + r > 0.0 && t + b > 0.0) {
@@ -222,6 +231,10 @@ pub struct Refined {
     pub taken: bool,
     /// The head's foreground probability where its box was read (0 when it did not run).
     pub score: f32,
+    /// The head ran on this frame (false: not due, target too small or no template).
+    pub ran: bool,
+    /// The head's box centre, frame pixels, when its box was taken (`report_center`).
+    pub head_pos: Option<Point2>,
 }
 
 /// IoU of two boxes given by centre and size.
@@ -255,6 +268,8 @@ pub fn fuse(
         size: prior,
         taken: false,
         score: hb.map_or(0.0, |h| h.score),
+        ran: hb.is_some(),
+        head_pos: None,
     };
     let Some(h) = hb else {
         return keep;
@@ -293,6 +308,8 @@ pub fn fuse(
         size,
         taken: true,
         score: h.score,
+        ran: true,
+        head_pos: Some(head_pos),
     }
 }
 
@@ -342,7 +359,7 @@ impl BoxRefiner {
         Ok(Some(Self {
             net,
             cfg: c.box_refine.clone(),
-            window: cosine_window(),
+            window: cosine_window(c.box_refine.search_cells),
             frames: 0,
             calib: (1.0, 1.0),
         }))
@@ -400,8 +417,12 @@ impl BoxRefiner {
         if !(s_z.is_finite() && s_z > 0.0) {
             return Ok(None);
         }
-        let s_x = s_z * SEARCH_SIDE as f32 / TEMPLATE_SIDE as f32;
-        let Some((margins, loc)) = self.net.score_maps(frame, pos, s_x)? else {
+        // The crop keeps NanoTrack's pixels per target pixel (`TEMPLATE_SIDE / s_z`) at
+        // any `search_cells`: a smaller one is a tighter context around the position.
+        let cells = self.cfg.search_cells;
+        let side = 16 * cells - 1;
+        let s_x = s_z * side as f32 / TEMPLATE_SIDE as f32;
+        let Some((margins, loc)) = self.net.score_maps_sized(frame, pos, s_x, cells)? else {
             return Ok(None);
         };
         let scale_z = TEMPLATE_SIDE as f32 / s_z;
@@ -448,7 +469,8 @@ impl BoxRefiner {
                 ..h
             });
         let out = fuse(hb, filter_pos, prior, &self.cfg);
-        Ok(out)
+        // The head ran even when it found no readable box.
+        Ok(Refined { ran: true, ..out })
     }
 }
 
@@ -486,7 +508,7 @@ mod tests {
             Size2 { w: 20.0, h: 20.0 },
             2.0,
             &cfg(),
-            &cosine_window(),
+            &cosine_window(SEARCH_CELLS),
         )
         .unwrap();
         assert!((hb.dx - 8.0).abs() < 1e-4 && hb.dy.abs() < 1e-4, "{hb:?}");
@@ -499,7 +521,7 @@ mod tests {
     #[test]
     fn select_refuses_bad_maps() {
         let (m, loc) = maps(8, 8, 40.0, 40.0);
-        let w = cosine_window();
+        let w = cosine_window(SEARCH_CELLS);
         let s = Size2 { w: 20.0, h: 20.0 };
         assert!(select(&m[1..], &loc, s, 2.0, &cfg(), &w).is_none());
         assert!(select(&m, &loc, Size2 { w: 0.0, h: 20.0 }, 2.0, &cfg(), &w).is_none());
@@ -578,7 +600,7 @@ mod tests {
         m[8 * SEARCH_CELLS + 8] = 0.5;
         m[8 * SEARCH_CELLS + 10] = 8.0;
         let prior = Size2 { w: 20.0, h: 10.0 };
-        let w = cosine_window();
+        let w = cosine_window(SEARCH_CELLS);
         let peak = select(&m, &loc, prior, 2.0, &cfg(), &w).unwrap();
         assert!(peak.dx > 10.0, "the arg-max takes the look-alike: {peak:?}");
         let at = read_at(&m, &loc, prior, 2.0, &cfg()).unwrap();

@@ -531,6 +531,11 @@ pub struct BoxRefineConfig {
     /// Weight of the head's centre against the filter's when the head's box is taken (0:
     /// the filter's centre, 1: the head's).
     pub center_weight: f32,
+    /// Weight of the head's centre in the *reported* box when its box is taken (0: the
+    /// track's centre; 1: the head's). Unlike `center_weight` the filter's track and the
+    /// lost-state search keep their own centre; the offset is held between head runs and
+    /// dropped when the head refuses or the track is lost.
+    pub report_center: f32,
     /// NanoTrack's scale/aspect-change penalty `k`: score × exp(−k·(r·s − 1)).
     pub penalty_k: f32,
     /// NanoTrack's cosine-window weight on the penalised score map.
@@ -559,6 +564,11 @@ pub struct BoxRefineConfig {
     /// Run the head every this many tracked frames (1: every frame); between runs the box
     /// follows the scale filter with the last correction.
     pub interval: usize,
+    /// Side of the head's search map in grid points (even, 4 to 16): the crop is
+    /// `16·search_cells − 1` pixels at NanoTrack's pixels per target pixel, so 16 is
+    /// NanoTrack's 255-pixel search and smaller is a tighter context around the filter's
+    /// position, the backbone's cost going with its area.
+    pub search_cells: usize,
 }
 
 /// What [`crate::box_refine`] blends the head's box into.
@@ -604,6 +614,7 @@ impl Default for BoxRefineConfig {
             max_offset: 0.5,
             min_side: 20.0,
             center_weight: 0.0,
+            report_center: 0.0,
             penalty_k: 0.148,
             window_influence: 0.462,
             size_rate: 0.39,
@@ -613,6 +624,7 @@ impl Default for BoxRefineConfig {
             feed_scale: false,
             prior: BoxPrior::Box,
             calibrate: true,
+            search_cells: 16,
             interval: 1,
         }
     }
@@ -951,12 +963,25 @@ impl TrackerConfig {
         float_key("box_refine.max_offset", b.max_offset)?;
         float_key("box_refine.min_side", b.min_side)?;
         float_key("box_refine.center_weight", b.center_weight)?;
+        float_key("box_refine.report_center", b.report_center)?;
         float_key("box_refine.penalty_k", b.penalty_k)?;
         float_key("box_refine.window_influence", b.window_influence)?;
         float_key("box_refine.size_rate", b.size_rate)?;
         float_key("box_refine.min_iou", b.min_iou)?;
         float_key("box_refine.max_change", b.max_change)?;
         int_key("box_refine.interval", b.interval)?;
+        int_key("box_refine.search_cells", b.search_cells)?;
+        check(
+            b.search_cells.is_multiple_of(2),
+            "box_refine.search_cells",
+            b.search_cells,
+            "even (the crop centre is a grid point only for an even side)",
+        )?;
+        if b.search_cells != 16 && b.mode == BoxRefineMode::NanotrackOrt {
+            return Err(ConfigError::Inconsistent(
+                "box_refine.search_cells other than 16 needs box_refine.mode nanotrack (the ONNX Runtime networks are planned for 16)".into(),
+            ));
+        }
         float_key("motion.min_peak", self.motion.min_peak)?;
         float_key("motion.own_rate", self.motion.own_rate)?;
         float_key("motion.min_move", self.motion.min_move)?;
@@ -1221,6 +1246,26 @@ mod tests {
             );
         }
         assert_eq!(RedetectionConfig::default().filter_search, Auto);
+    }
+
+    #[test]
+    fn the_learned_box_search_takes_even_sides_and_the_pure_rust_networks() {
+        let with = |cells: usize, mode: BoxRefineMode| {
+            let mut c = TrackerConfig::default();
+            c.box_refine.search_cells = cells;
+            c.box_refine.mode = mode;
+            c.validate()
+        };
+        for cells in [4, 8, 12, 16] {
+            with(cells, BoxRefineMode::Nanotrack).unwrap();
+        }
+        for cells in [0, 2, 5, 11, 17, 18] {
+            let e = with(cells, BoxRefineMode::Nanotrack).unwrap_err().to_string();
+            assert!(e.contains("box_refine.search_cells"), "{cells}: {e}");
+        }
+        with(16, BoxRefineMode::NanotrackOrt).unwrap();
+        let e = with(12, BoxRefineMode::NanotrackOrt).unwrap_err().to_string();
+        assert!(e.contains("needs box_refine.mode nanotrack"), "{e}");
     }
 
     #[test]

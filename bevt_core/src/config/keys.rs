@@ -553,6 +553,8 @@ pub static TRACKER_KEYS: &[KeySpec] = &[
         "Targets whose shorter side is below this keep the prior box (the head does not run; the initial box is not calibrated)."),
     key("box_refine.center_weight", Float, closed(0.0, 1.0), "", FIXED,
         "Weight of the head's centre against the filter's when the head's box is taken (0: the filter's centre, so precision is `mode: none`'s; 1: the head's)."),
+    key("box_refine.report_center", Float, closed(0.0, 1.0), "", FIXED,
+        "Weight of the head's centre in the reported box only, when its box is taken (0: the track's centre; 1: the head's). The filter's track, its learning and the lost-state search keep their own centre (unlike `center_weight`); the offset is held between head runs (`interval`) and dropped when the head refuses its box or the track is lost."),
     key("box_refine.penalty_k", Float, closed(0.0, 10.0), "", FIXED,
         "NanoTrack's scale/aspect-change penalty k: score × exp(−k·(r·s − 1))."),
     key("box_refine.window_influence", Float, closed(0.0, 1.0), "", FIXED,
@@ -573,6 +575,8 @@ pub static TRACKER_KEYS: &[KeySpec] = &[
         "Calibrate the head to the initial box: the given box defines the target's extent, and the per-side ratio of it to the head's box on the initial frame (within ×/÷1.5) scales every later head box, removing the head's per-object bias (a building with its surroundings). Needs an initial box whose shorter side is at least `min_side`; otherwise the head's boxes are taken as they are."),
     key("box_refine.interval", Int, int(1, 1000), "frames", FIXED,
         "Run the head every this many tracked frames (1: every frame); between runs the box follows the scale filter with the last correction (the cost bound)."),
+    key("box_refine.search_cells", Int, int(4, 16), "grid points", FIXED,
+        "Side of the head's search map, even: the crop is 16·n − 1 pixels at NanoTrack's pixels per target pixel (16: NanoTrack's 255-pixel search; smaller: a tighter context around the filter's position, the backbone's cost going with the crop's area). Other than 16 needs `mode: nanotrack`."),
     // motion
     key("motion.camera", Bool, Range::Any, "", FIXED,
         "Camera motion compensation: each frame's search is centred where the scene's shift since the previous frame (phase correlation of coarse grey copies of the whole frames) plus the target's own motion in the scene put the target, instead of at its last position. For small targets under camera jerks (a 47 px search window around an 11 × 8 px target). While the target is lost, the lost search's followed position and candidates move the same way. Off by default: under the eval's `shake` it gains 0.09–0.17 AUC on the dev set; unshaken it does not gain (0.601 → 0.560, chosen in 1 of 7 leave-one-out folds) and lowers flags precision 0.948 → 0.639, and it loses under aspect, tiny-target and look-alike perturbations (docs/results.md \"Camera motion compensation\")."),

@@ -160,6 +160,109 @@ struct Plans {
     search: Planned,
     cls: Planned,
     reg: Planned,
+    /// The parsed models, for planning other search sizes on first use.
+    models: Models,
+    /// Backbone and head plans for search maps of other sides than 16 cells
+    /// ([`NanoVerifier::score_maps_sized`]), planned on first use and shared.
+    sized: Mutex<Vec<(usize, Arc<SizedPlans>)>>,
+}
+
+/// The parsed backbone and head and the names they go by.
+struct Models {
+    backbone: nn::onnx::Model,
+    backbone_name: String,
+    head: nn::onnx::Model,
+    head_name: String,
+}
+
+/// The backbone for a `16·cells − 1` pixel search crop and the head's two branches on its
+/// `cells × cells` features.
+struct SizedPlans {
+    search: Planned,
+    cls: Planned,
+    reg: Planned,
+}
+
+impl Plans {
+    /// The plans for search maps of `cells × cells` (planned once per process and size).
+    fn sized(&self, cells: usize) -> Result<Arc<SizedPlans>, NanoError> {
+        let mut cache = self.sized.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some((_, p)) = cache.iter().find(|(c, _)| *c == cells) {
+            return Ok(Arc::clone(p));
+        }
+        let m = &self.models;
+        let side = STRIDE_PX * cells - 1;
+        let search = Planned::new(
+            &m.backbone,
+            BACKBONE_KEY,
+            &m.backbone_name,
+            &[("input", &[1, 3, side, side])],
+            &["output"],
+        )?;
+        let t = TEMPLATE_CELLS;
+        let head = head_for_cells(&m.head, cells);
+        let head_plan = |outputs: &[&str]| {
+            Planned::new(
+                &head,
+                HEAD_KEY,
+                &m.head_name,
+                &[
+                    ("input1", &[1, CHANNELS, t, t]),
+                    ("input2", &[1, CHANNELS, cells, cells]),
+                ],
+                outputs,
+            )
+        };
+        let p = Arc::new(SizedPlans {
+            search,
+            cls: head_plan(&["output1"])?,
+            reg: head_plan(&["output2"])?,
+        });
+        // A process uses one or two sizes; the bound keeps a misuse from growing it.
+        if cache.len() >= MAX_CACHED_PLANS {
+            cache.remove(0);
+        }
+        cache.push((cells, Arc::clone(&p)));
+        Ok(p)
+    }
+}
+
+/// NanoTrack v2's head for `cells × cells` search features. The head is convolutional
+/// but for two things its ONNX file fixes to 16×16: the declared shape of `input2` and the
+/// shape `[1, −1, 16, 16]` its pixel-wise correlations are reshaped to. Both are given
+/// `cells` here; every other node works on any size (its channel attention pools over
+/// whatever map it gets). Another model is returned unchanged and fails to plan if it
+/// cannot take the size.
+fn head_for_cells(head: &nn::onnx::Model, cells: usize) -> nn::onnx::Model {
+    let mut h = head.clone();
+    let side = SEARCH_CELLS as i64;
+    for t in h.initializers.values_mut() {
+        if let nn::onnx::Data::I64(v) = &mut t.data {
+            if v.as_slice() == [1, -1, side, side] {
+                v[2] = cells as i64;
+                v[3] = cells as i64;
+            }
+        }
+    }
+    for i in h.inputs.iter_mut().filter(|i| i.name == "input2") {
+        if let [_, _, hh, ww] = i.dims.as_mut_slice() {
+            *hh = Some(cells);
+            *ww = Some(cells);
+        }
+    }
+    h
+}
+
+/// The backbone's stride in crop pixels: a `16·n − 1` pixel crop gives `n × n` features
+/// whose grid point `j` sits at crop pixel `16·j − 1` (NanoTrack's 255 → 16 and 127 → 8).
+const STRIDE_PX: usize = 16;
+
+/// Run buffers for one [`SizedPlans`].
+struct SizedNets {
+    cells: usize,
+    search: Net,
+    cls: Net,
+    reg: Net,
 }
 
 /// Plans by `(verifier_backbone, verifier_head)` as configured (empty: embedded). Every
@@ -314,6 +417,10 @@ enum Backend {
         search: Box<Net>,
         cls: Box<Net>,
         reg: Box<Net>,
+        /// The plans (for [`Plans::sized`]).
+        plans: Arc<Plans>,
+        /// Buffers for the last other search size asked for.
+        sized: Option<Box<SizedNets>>,
     },
     /// ONNX Runtime sessions (cargo feature `cnn`).
     #[cfg(feature = "cnn")]
@@ -412,21 +519,31 @@ impl NanoVerifier {
                 outputs,
             )
         };
+        let (cls, reg) = (head_plan(&["output1"])?, head_plan(&["output2"])?);
         Ok(Plans {
             template,
             search,
-            cls: head_plan(&["output1"])?,
-            reg: head_plan(&["output2"])?,
+            cls,
+            reg,
+            models: Models {
+                backbone: bb,
+                backbone_name: bb_name,
+                head: hd,
+                head_name: hd_name,
+            },
+            sized: Mutex::new(Vec::new()),
         })
     }
 
     /// Fresh buffers for `plans`.
-    fn native_backend(plans: &Plans) -> Backend {
+    fn native_backend(plans: &Arc<Plans>) -> Backend {
         Backend::Native {
             template: Box::new(Net::new(&plans.template)),
             search: Box::new(Net::new(&plans.search)),
             cls: Box::new(Net::new(&plans.cls)),
             reg: Box::new(Net::new(&plans.reg)),
+            plans: Arc::clone(plans),
+            sized: None,
         }
     }
 
@@ -672,6 +789,89 @@ impl NanoVerifier {
         Ok(Some(self.run_head()?))
     }
 
+    /// [`NanoVerifier::score_maps`] on a smaller search crop: the square of side `side` at
+    /// `center` resampled to `16·cells − 1` pixels (`cells` even, 4 to 16; 16 is
+    /// [`NanoVerifier::score_maps`] itself), giving `cells × cells` maps whose centre
+    /// point is the crop centre, in the same crop-pixel units (the backbone's stride is 16
+    /// whatever the crop). The backbone's cost goes with the crop's area: what
+    /// [`crate::box_refine`] needs around a position the filter already found. The other
+    /// sizes are planned on first use (once per process) and run on [`crate::nn`] only.
+    ///
+    /// # Errors
+    /// A network error; `cells` odd or out of range, or the ONNX Runtime backend with
+    /// `cells` other than 16.
+    pub fn score_maps_sized(
+        &mut self,
+        frame: &Frame<'_>,
+        center: Point2,
+        side: f32,
+        cells: usize,
+    ) -> Result<Option<HeadMaps>, TrackError> {
+        if cells == SEARCH_CELLS {
+            return self.score_maps(frame, center, side);
+        }
+        let path = self.backend.paths().0.to_string();
+        let run_err = |reason: String| NanoError::Run {
+            key: BACKBONE_KEY,
+            path: path.clone(),
+            reason,
+        };
+        if !(4..=SEARCH_CELLS).contains(&cells) || !cells.is_multiple_of(2) {
+            return Err(run_err(format!(
+                "search maps of {cells} cells; an even number from 4 to 16 is supported"
+            ))
+            .into());
+        }
+        if self.template.is_empty() || !(side.is_finite() && side > 0.0) {
+            return Ok(None);
+        }
+        let (plans, nets) = match &mut self.backend {
+            Backend::Native { plans, sized, .. } => (plans, sized),
+            #[cfg(feature = "cnn")]
+            Backend::Ort(_) => return Err(run_err(format!(
+                "search maps of {cells} cells need the pure-Rust networks (ONNX Runtime plans 16)"
+            ))
+            .into()),
+        };
+        if nets.as_ref().is_none_or(|n| n.cells != cells) {
+            let p = plans.sized(cells)?;
+            *nets = Some(Box::new(SizedNets {
+                cells,
+                search: Net::new(&p.search),
+                cls: Net::new(&p.cls),
+                reg: Net::new(&p.reg),
+            }));
+        }
+        let out = STRIDE_PX * cells - 1;
+        self.crop(frame, center, side, out);
+        let Backend::Native { sized: Some(n), .. } = &mut self.backend else {
+            return Ok(None);
+        };
+        let feat = n
+            .search
+            .run(
+                &[(&[1, 3, out, out], &self.input)],
+                &[("output", &[1, CHANNELS, cells, cells])],
+            )?
+            .swap_remove(0);
+        let t = TEMPLATE_CELLS;
+        let inputs: [(&[usize], &[f32]); 2] = [
+            (&[1, CHANNELS, t, t], &self.template),
+            (&[1, CHANNELS, cells, cells], &feat),
+        ];
+        let logits = n
+            .cls
+            .run(&inputs, &[("output1", &[1, 2, cells, cells])])?
+            .swap_remove(0);
+        let loc = n
+            .reg
+            .run(&inputs, &[("output2", &[1, 4, cells, cells])])?
+            .swap_remove(0);
+        let m = cells * cells;
+        let margins = (0..m).map(|i| logits[m + i] - logits[i]).collect();
+        Ok(Some((margins, loc)))
+    }
+
     /// True once a template is set.
     pub fn has_template(&self) -> bool {
         !self.template.is_empty()
@@ -811,6 +1011,89 @@ mod tests {
             assert_eq!(bits(&margins), bits(&w_margins), "margins");
             assert_eq!(bits(&loc), bits(&w_loc), "box distances");
         }
+    }
+    /// The head for other search sizes differs from the file in the reshape to the map's
+    /// side and the declared search input only; at 16 cells it is the file's model.
+    #[test]
+    fn the_head_for_other_sizes_changes_only_the_map_side() {
+        let (head, _) = load(HEAD_KEY, "", EMBEDDED_HEAD).unwrap();
+        assert_eq!(head_for_cells(&head, SEARCH_CELLS), head);
+        let h12 = head_for_cells(&head, 12);
+        assert_eq!(h12.nodes, head.nodes);
+        let changed: Vec<_> = head
+            .initializers
+            .iter()
+            .filter(|(k, t)| h12.initializers[*k] != **t)
+            .map(|(k, _)| k.clone())
+            .collect();
+        assert_eq!(changed.len(), 1, "{changed:?}");
+        assert_eq!(
+            h12.initializers[&changed[0]].data,
+            nn::onnx::Data::I64(vec![1, -1, 12, 12])
+        );
+        let input2 = |m: &nn::onnx::Model| {
+            m.inputs
+                .iter()
+                .find(|i| i.name == "input2")
+                .map(|i| i.dims.clone())
+        };
+        assert_eq!(
+            input2(&h12),
+            Some(vec![Some(1), Some(48), Some(12), Some(12)])
+        );
+    }
+
+    /// A smaller search crop (12 cells, 191 pixels) still finds a textured target at its
+    /// centre and regresses a box of about its size, like the 255-pixel one; odd or
+    /// out-of-range sides are errors, a degenerate crop side gives nothing.
+    #[test]
+    fn smaller_search_maps_find_the_target_at_the_crop_centre() {
+        use crate::eval::synth::SynthParams;
+        use crate::image::PixelFormat;
+        let seq = SynthParams::default();
+        let f = seq.frame(0);
+        let frame = Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+        let (c, (w, h)) = (f.truth.center(), (f.truth.w, f.truth.h));
+        let mut v = NanoVerifier::new("", "").unwrap();
+        assert!(
+            v.score_maps_sized(&frame, c, 100.0, 12).unwrap().is_none(),
+            "no template"
+        );
+        v.set_template(&frame, c, w, h).unwrap();
+        let s_z = context_side(w, h);
+        for cells in [16usize, 12] {
+            let side = s_z * (16 * cells - 1) as f32 / TEMPLATE_SIDE as f32;
+            let (margins, loc) = v.score_maps_sized(&frame, c, side, cells).unwrap().unwrap();
+            assert_eq!(
+                (margins.len(), loc.len()),
+                (cells * cells, 4 * cells * cells)
+            );
+            let (best, _) = best_point(&margins).unwrap();
+            let (j, k) = (best / cells, best % cells);
+            let mid = cells / 2;
+            assert!(
+                j.abs_diff(mid) <= 1 && k.abs_diff(mid) <= 1,
+                "{cells} cells: best point ({j}, {k})"
+            );
+            // The centre point's box, in frame pixels, against the target's.
+            let (n, i) = (cells * cells, mid * cells + mid);
+            let px = s_z / TEMPLATE_SIDE as f32;
+            let (bw, bh) = (
+                (loc[i] + loc[2 * n + i]) * px,
+                (loc[n + i] + loc[3 * n + i]) * px,
+            );
+            assert!(
+                (bw / w - 1.0).abs() < 0.35 && (bh / h - 1.0).abs() < 0.35,
+                "{cells} cells: box {bw} x {bh} for a {w} x {h} target"
+            );
+        }
+        for bad in [3usize, 11, 18] {
+            assert!(v.score_maps_sized(&frame, c, 100.0, bad).is_err(), "{bad}");
+        }
+        assert!(v
+            .score_maps_sized(&frame, c, f32::NAN, 12)
+            .unwrap()
+            .is_none());
     }
 }
 
