@@ -188,7 +188,7 @@ skipped=(
   tracker::tests::camera_motion_compensation_keeps_a_small_target_through_camera_jerks
   tracker::tests::the_lost_search_moves_with_the_scene_under_camera_motion
   tracker::tests::a_confirmed_drift_makes_the_track_lost_with_its_reason
-  tracker::tests::box_refine_does_not_hurt_a_target_under_20_px
+  tracker::tests::box_refine_steps_aside_under_min_side_and_does_not_hurt_a_small_target
   tracker::tests::box_refine_does_not_jump_to_a_look_alike_beside_the_target
   tracker::tests::box_refine_follows_an_aspect_change_the_filter_cannot
   tracker::tests::box_refine_keeps_up_with_a_fast_size_change

@@ -609,12 +609,12 @@ pub enum BoxRefineMode {
 impl Default for BoxRefineConfig {
     fn default() -> Self {
         Self {
-            mode: BoxRefineMode::None,
+            mode: BoxRefineMode::Nanotrack,
             min_score: 0.5,
             max_offset: 0.5,
-            min_side: 20.0,
+            min_side: 10.0,
             center_weight: 0.0,
-            report_center: 0.0,
+            report_center: 1.0,
             penalty_k: 0.148,
             window_influence: 0.462,
             size_rate: 0.39,
@@ -624,7 +624,7 @@ impl Default for BoxRefineConfig {
             feed_scale: false,
             prior: BoxPrior::Box,
             calibrate: true,
-            search_cells: 16,
+            search_cells: 12,
             interval: 1,
         }
     }
@@ -1260,11 +1260,15 @@ mod tests {
             with(cells, BoxRefineMode::Nanotrack).unwrap();
         }
         for cells in [0, 2, 5, 11, 17, 18] {
-            let e = with(cells, BoxRefineMode::Nanotrack).unwrap_err().to_string();
+            let e = with(cells, BoxRefineMode::Nanotrack)
+                .unwrap_err()
+                .to_string();
             assert!(e.contains("box_refine.search_cells"), "{cells}: {e}");
         }
         with(16, BoxRefineMode::NanotrackOrt).unwrap();
-        let e = with(12, BoxRefineMode::NanotrackOrt).unwrap_err().to_string();
+        let e = with(12, BoxRefineMode::NanotrackOrt)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("needs box_refine.mode nanotrack"), "{e}");
     }
 
@@ -1475,6 +1479,10 @@ mod tests {
         c.verification.score = VerificationScore::Confidence;
         c.track_state = TrackStateConfig::default();
         c.redetection = RedetectionConfig::default();
+        // Issue 19: the learned box on the filter (NanoTrack v2's head, its centre and size
+        // in the reported box; the reference has the filter's box).
+        assert_eq!(c.box_refine.mode, BoxRefineMode::None);
+        c.box_refine = BoxRefineConfig::default();
         assert_eq!(c, TrackerConfig::default());
         // Issue 9: the NanoTrack verifier, embedded models (no file at run time).
         let r = &TrackerConfig::default().redetection;

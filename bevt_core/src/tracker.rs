@@ -1700,10 +1700,18 @@ mod tests {
         assert_eq!(auto, None, "the filter swept with a verifier searching");
     }
 
-    /// The config with the learned box on the filter on (`box_refine.mode: nanotrack`).
+    /// The config with the learned box on the filter on (`box_refine.mode: nanotrack`, the
+    /// default's).
     fn refined(cfg: &TrackerConfig) -> TrackerConfig {
         let mut c = cfg.clone();
         c.box_refine.mode = crate::config::BoxRefineMode::Nanotrack;
+        c
+    }
+
+    /// The config with the learned box off: the filter's own box (`box_refine.mode: none`).
+    fn filter_only(cfg: &TrackerConfig) -> TrackerConfig {
+        let mut c = cfg.clone();
+        c.box_refine.mode = crate::config::BoxRefineMode::None;
         c
     }
 
@@ -1766,7 +1774,7 @@ mod tests {
             ..SynthParams::default()
         };
         let cfg = TrackerConfig::default();
-        let (plain, plain_last) = ious(&seq, &cfg);
+        let (plain, plain_last) = ious(&seq, &filter_only(&cfg));
         let (box_ref, last) = ious(&seq, &refined(&cfg));
         let truth = seq.truth(seq.frames - 1);
         let ratio = |b: &BBox| (b.w / b.h) / (truth.w / truth.h);
@@ -1790,16 +1798,18 @@ mod tests {
 
     #[test]
     fn box_refine_leaves_the_filter_track_alone_and_changes_only_the_box() {
-        // feed_scale false, center_weight 0 (the defaults): every box centre is the
-        // filter's, so precision is mode none's by construction; only sizes differ.
+        // feed_scale false, center_weight 0 and report_center 0: every box centre is the
+        // filter's, so precision is mode none's by construction; only sizes differ. (The
+        // default's report_center 1 moves the reported centre only: the next test.)
         let seq = SynthParams {
             frames: 30,
             scale_rate: 1.0,
             aspect_rate: 2f32.powf(1.0 / 29.0),
             ..SynthParams::default()
         };
-        let cfg = TrackerConfig::default();
-        let plain = boxes(&seq, &cfg, None);
+        let mut cfg = TrackerConfig::default();
+        cfg.box_refine.report_center = 0.0;
+        let plain = boxes(&seq, &filter_only(&cfg), None);
         let refined_boxes = boxes(&seq, &refined(&cfg), None);
         for (a, b) in plain.iter().zip(&refined_boxes) {
             let (ca, cb) = (a.center(), b.center());
@@ -1854,7 +1864,8 @@ mod tests {
             path_amplitude: (25.0, 15.0),
             ..SynthParams::default()
         };
-        let track = refined(&TrackerConfig::default());
+        let mut track = refined(&TrackerConfig::default());
+        track.box_refine.report_center = 0.0;
         let mut centred = track.clone();
         centred.box_refine.report_center = 1.0;
         let (a, b) = (outputs(&seq, &track, None), outputs(&seq, &centred, None));
@@ -1897,7 +1908,8 @@ mod tests {
                 .collect();
             mean(&e[e.len() - 10..])
         };
-        let track = refined(&TrackerConfig::default());
+        let mut track = refined(&TrackerConfig::default());
+        track.box_refine.report_center = 0.0;
         let mut centred = track.clone();
         centred.box_refine.report_center = 1.0;
         let (plain, moved) = (err(&track), err(&centred));
@@ -1919,7 +1931,7 @@ mod tests {
         };
         let cfg = TrackerConfig::default();
         let on = refined(&cfg);
-        let plain = boxes(&seq, &cfg, Some(1.5));
+        let plain = boxes(&seq, &filter_only(&cfg), Some(1.5));
         let with = boxes(&seq, &on, Some(1.5));
         let step = 1.0 + on.box_refine.max_change + 1e-3;
         for w in with.windows(2) {
@@ -1957,7 +1969,7 @@ mod tests {
             ..SynthParams::default()
         };
         let cfg = TrackerConfig::default();
-        let (plain, _) = ious(&seq, &cfg);
+        let (plain, _) = ious(&seq, &filter_only(&cfg));
         let (box_ref, last) = ious(&seq, &refined(&cfg));
         let truth = seq.truth(seq.frames - 1);
         let area = (last.w * last.h / (truth.w * truth.h)).sqrt();
@@ -1971,7 +1983,12 @@ mod tests {
     }
 
     #[test]
-    fn box_refine_does_not_hurt_a_target_under_20_px() {
+    fn box_refine_steps_aside_under_min_side_and_does_not_hurt_a_small_target() {
+        // A 14 × 10 px target: the default's min_side (10 px) lets the head run. Measured:
+        // mean IoU 0.915 with the head against the filter's 0.936 (the head's box of this
+        // synthetic texture is a little loose, as in the look-alike test; on the dev set's
+        // small targets it gains: wakeboard7 0.625 → 0.814 AUC); with min_side 20 the stage
+        // steps aside and the boxes are the filter's.
         let seq = SynthParams {
             frames: 40,
             target: (14.0, 10.0),
@@ -1980,28 +1997,25 @@ mod tests {
             ..SynthParams::default()
         };
         let cfg = TrackerConfig::default();
-        let (plain, _) = ious(&seq, &cfg);
-        // `box_refine.min_side` (20 px) makes the stage step aside: the same boxes. With
-        // `min_side: 0` the head costs 0.006 mean IoU here (0.930 against 0.936 measured).
+        let (plain, _) = ious(&seq, &filter_only(&cfg));
         let (box_ref, _) = ious(&seq, &refined(&cfg));
-        assert_eq!(box_ref, plain);
-        let mut on = refined(&cfg);
-        on.box_refine.min_side = 0.0;
-        let (forced, _) = ious(&seq, &on);
-        assert_ne!(forced, plain, "the head runs below min_side when told to");
-        assert!(
-            mean(&forced) >= mean(&plain) - 0.02,
-            "forced: mean IoU {} vs filter alone {}",
-            mean(&forced),
+        assert_ne!(box_ref, plain, "the head runs on a 10 px side");
+        println!(
+            "mean IoU {} with the head, {} without",
+            mean(&box_ref),
             mean(&plain)
         );
         assert!(
-            mean(&box_ref) >= mean(&plain) - 0.02,
+            mean(&box_ref) >= mean(&plain) - 0.04,
             "mean IoU {} vs filter alone {}",
             mean(&box_ref),
             mean(&plain)
         );
-        assert!(mean(&box_ref) > 0.5, "{}", mean(&box_ref));
+        assert!(mean(&box_ref) > 0.8, "{}", mean(&box_ref));
+        let mut aside = refined(&cfg);
+        aside.box_refine.min_side = 20.0;
+        let (stepped, _) = ious(&seq, &aside);
+        assert_eq!(stepped, plain, "under min_side the box is the filter's");
     }
 
     #[test]

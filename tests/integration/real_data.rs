@@ -7,10 +7,12 @@ use bevt_node::tool::report::summarize_run;
 use bevt_node::tool::runner::run_sequence;
 use bevt_tests::dev_dataset;
 
-/// Measured with the default configuration (README): building4 P@20 1.000, AUC 0.72.
-/// Floors leave room for float differences across machines, not for regressions.
+/// Measured with the default configuration (README): building4 P@20 1.000, AUC 0.643 (0.729
+/// with the filter's box, `box_refine.mode: none`: building4 is the sequence the learned box
+/// loses, its head drawing the rooftop with its surroundings; docs/results.md). Floors leave
+/// room for float differences across machines, not for regressions.
 const BUILDING4_MIN_P20: f64 = 0.95;
-const BUILDING4_MIN_AUC: f64 = 0.65;
+const BUILDING4_MIN_AUC: f64 = 0.62;
 
 #[test]
 fn building4_accuracy_does_not_regress() {

@@ -828,10 +828,12 @@ impl NanoVerifier {
         let (plans, nets) = match &mut self.backend {
             Backend::Native { plans, sized, .. } => (plans, sized),
             #[cfg(feature = "cnn")]
-            Backend::Ort(_) => return Err(run_err(format!(
+            Backend::Ort(_) => {
+                return Err(run_err(format!(
                 "search maps of {cells} cells need the pure-Rust networks (ONNX Runtime plans 16)"
             ))
-            .into()),
+                .into())
+            }
         };
         if nets.as_ref().is_none_or(|n| n.cells != cells) {
             let p = plans.sized(cells)?;
