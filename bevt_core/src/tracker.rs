@@ -1852,6 +1852,16 @@ mod tests {
             .collect()
     }
 
+    /// The learned box with the filter's centre (`report_center: 0`) and with the head's
+    /// (`report_center: 1`, the default), all else the default's.
+    fn centre_pair() -> (TrackerConfig, TrackerConfig) {
+        let mut track = refined(&TrackerConfig::default());
+        track.box_refine.report_center = 0.0;
+        let mut centred = track.clone();
+        centred.box_refine.report_center = 1.0;
+        (track, centred)
+    }
+
     #[test]
     fn box_refine_report_center_moves_the_reported_box_not_the_track() {
         // The head's centre in the reported box only: the filter's track (its confidence,
@@ -1864,10 +1874,7 @@ mod tests {
             path_amplitude: (25.0, 15.0),
             ..SynthParams::default()
         };
-        let mut track = refined(&TrackerConfig::default());
-        track.box_refine.report_center = 0.0;
-        let mut centred = track.clone();
-        centred.box_refine.report_center = 1.0;
+        let (track, centred) = centre_pair();
         let (a, b) = (outputs(&seq, &track, None), outputs(&seq, &centred, None));
         let mut moved = 0;
         for (x, y) in a.iter().zip(&b) {
@@ -1908,10 +1915,7 @@ mod tests {
                 .collect();
             mean(&e[e.len() - 10..])
         };
-        let mut track = refined(&TrackerConfig::default());
-        track.box_refine.report_center = 0.0;
-        let mut centred = track.clone();
-        centred.box_refine.report_center = 1.0;
+        let (track, centred) = centre_pair();
         let (plain, moved) = (err(&track), err(&centred));
         println!("last-10 mean centre error {moved} px with the head's centre, {plain} without");
         assert!(moved < 0.8 * plain, "{moved} px against {plain} px");
