@@ -853,13 +853,14 @@ impl BevtTracker {
             w: size.w.max(1.0),
             h: size.h.max(1.0),
         };
-        // The learned box's centre (`box_refine.report_center`); never on a lost frame.
+        // The learned box's centre (`box_refine.report_center`), in the frame as the track's
+        // is; never on a lost frame.
         let pos = if state == TrackState::Lost {
             pos
         } else {
             Point2 {
-                x: pos.x + st.center_offset.0 * size.w,
-                y: pos.y + st.center_offset.1 * size.h,
+                x: (pos.x + st.center_offset.0 * size.w).clamp(0.0, st.frame_w as f32),
+                y: (pos.y + st.center_offset.1 * size.h).clamp(0.0, st.frame_h as f32),
             }
         };
         TrackOutput {
