@@ -701,8 +701,7 @@ impl NanoVerifier {
             #[cfg(feature = "cnn")]
             Backend::Ort(o) => {
                 let (cls, loc) = o.head(&self.template, &self.search)?;
-                let n = x * x;
-                let margins = (0..n).map(|i| cls[n + i] - cls[i]).collect();
+                let margins = margins_of(&cls);
                 return Ok((margins, Some(loc)));
             }
         };
@@ -713,8 +712,7 @@ impl NanoVerifier {
         let logits = cls
             .run(&inputs, &[("output1", &[1, 2, x, x])])?
             .swap_remove(0);
-        let n = x * x;
-        let margins: Vec<f32> = (0..n).map(|i| logits[n + i] - logits[i]).collect();
+        let margins = margins_of(&logits);
         if !want_box(&margins) {
             return Ok((margins, None));
         }
@@ -723,6 +721,13 @@ impl NanoVerifier {
             .swap_remove(0);
         Ok((margins, Some(loc)))
     }
+}
+
+/// Per grid point the foreground logit margin (foreground − background) of the head's
+/// classification output `[1, 2, n, n]` (background plane first).
+fn margins_of(logits: &[f32]) -> Vec<f32> {
+    let (bg, fg) = logits.split_at(logits.len() / 2);
+    fg.iter().zip(bg).map(|(f, b)| f - b).collect()
 }
 
 /// The grid point with the largest margin and that margin (`None` for no points).
@@ -869,8 +874,7 @@ impl NanoVerifier {
             .reg
             .run(&inputs, &[("output2", &[1, 4, cells, cells])])?
             .swap_remove(0);
-        let m = cells * cells;
-        let margins = (0..m).map(|i| logits[m + i] - logits[i]).collect();
+        let margins = margins_of(&logits);
         Ok(Some((margins, loc)))
     }
 
@@ -981,8 +985,7 @@ mod tests {
             .unwrap();
         let loc = out.swap_remove(1);
         let cls = out.swap_remove(0);
-        let n = x * x;
-        ((0..n).map(|i| cls[n + i] - cls[i]).collect(), loc)
+        (margins_of(&cls), loc)
     }
 
     fn bits(v: &[f32]) -> Vec<u32> {
