@@ -220,6 +220,19 @@ pub fn read_at(
     (finite && hb.size.w > 0.0 && hb.size.h > 0.0).then_some(hb)
 }
 
+/// The largest finite foreground logit margin among the grid points [`read_at`] reads (the
+/// `(2·READ_RADIUS+1)²` around the crop centre); `None` for maps of the wrong length or no
+/// finite margin there.
+pub fn centre_margin(margins: &[f32]) -> Option<f32> {
+    let cells = grid_cells(margins.len())?;
+    let c = cells / 2;
+    (c - READ_RADIUS..=c + READ_RADIUS)
+        .flat_map(|j| (c - READ_RADIUS..=c + READ_RADIUS).map(move |k| j * cells + k))
+        .map(|i| margins[i])
+        .filter(|m| m.is_finite())
+        .reduce(f32::max)
+}
+
 /// What the stage decided for one frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Refined {
@@ -235,6 +248,10 @@ pub struct Refined {
     pub ran: bool,
     /// The head's box centre, frame pixels, when its box was taken (`report_center`).
     pub head_pos: Option<Point2>,
+    /// The head's largest foreground logit margin at the filter's position (the grid points
+    /// [`read_at`] reads, around the crop centre) when it ran and gave finite maps: what
+    /// the verifier's score means, read at the box (`track_state.drift_head`).
+    pub witness: Option<f32>,
 }
 
 /// IoU of two boxes given by centre and size.
@@ -270,6 +287,7 @@ pub fn fuse(
         score: hb.map_or(0.0, |h| h.score),
         ran: hb.is_some(),
         head_pos: None,
+        witness: None,
     };
     let Some(h) = hb else {
         return keep;
@@ -310,6 +328,7 @@ pub fn fuse(
         score: h.score,
         ran: true,
         head_pos: Some(head_pos),
+        witness: None,
     }
 }
 
@@ -393,7 +412,7 @@ impl BoxRefiner {
             h: bbox.h,
         };
         if self.cfg.calibrate && size.w.min(size.h) >= self.cfg.min_side {
-            if let Some(hb) = self.head_box(frame, bbox.center(), size, BoxRead::Filter)? {
+            if let (Some(hb), _) = self.head_box(frame, bbox.center(), size, BoxRead::Filter)? {
                 let (cw, ch) = (size.w / hb.size.w, size.h / hb.size.h);
                 let lim = |c: f32| c.clamp(1.0 / MAX_CALIBRATION, MAX_CALIBRATION);
                 if cw.is_finite() && ch.is_finite() && cw > 0.0 && ch > 0.0 {
@@ -405,17 +424,18 @@ impl BoxRefiner {
     }
 
     /// The head's box on a search crop at `pos` sized from `prior` (frame pixels), read as
-    /// `read` says, uncalibrated. `None` when the crop or the maps give nothing usable.
+    /// `read` says, uncalibrated (`None` when the maps give no usable box), and the maps'
+    /// [`centre_margin`]. `(None, None)` when there is no crop or no maps.
     fn head_box(
         &mut self,
         frame: &Frame<'_>,
         pos: Point2,
         prior: Size2,
         read: BoxRead,
-    ) -> Result<Option<HeadBox>, TrackError> {
+    ) -> Result<(Option<HeadBox>, Option<f32>), TrackError> {
         let s_z = sz(prior.w, prior.h);
         if !(s_z.is_finite() && s_z > 0.0) {
-            return Ok(None);
+            return Ok((None, None));
         }
         // The crop keeps NanoTrack's pixels per target pixel (`TEMPLATE_SIDE / s_z`) at
         // any `search_cells`: a smaller one is a tighter context around the position.
@@ -423,13 +443,14 @@ impl BoxRefiner {
         let side = 16 * cells - 1;
         let s_x = s_z * side as f32 / TEMPLATE_SIDE as f32;
         let Some((margins, loc)) = self.net.score_maps_sized(frame, pos, s_x, cells)? else {
-            return Ok(None);
+            return Ok((None, None));
         };
         let scale_z = TEMPLATE_SIDE as f32 / s_z;
-        Ok(match read {
+        let hb = match read {
             BoxRead::Filter => read_at(&margins, &loc, prior, scale_z, &self.cfg),
             BoxRead::Peak => select(&margins, &loc, prior, scale_z, &self.cfg, &self.window),
-        })
+        };
+        Ok((hb, centre_margin(&margins)))
     }
 
     /// This frame's box: the head runs (every `interval` calls) on a search crop at
@@ -457,20 +478,23 @@ impl BoxRefiner {
             w: prior.w / cw,
             h: prior.h / ch,
         };
-        let hb = self
-            .head_box(frame, filter_pos, head_prior, self.cfg.read)?
-            .map(|h| HeadBox {
-                dx: h.dx,
-                dy: h.dy,
-                size: Size2 {
-                    w: h.size.w * cw,
-                    h: h.size.h * ch,
-                },
-                ..h
-            });
+        let (hb, witness) = self.head_box(frame, filter_pos, head_prior, self.cfg.read)?;
+        let hb = hb.map(|h| HeadBox {
+            dx: h.dx,
+            dy: h.dy,
+            size: Size2 {
+                w: h.size.w * cw,
+                h: h.size.h * ch,
+            },
+            ..h
+        });
         let out = fuse(hb, filter_pos, prior, &self.cfg);
         // The head ran even when it found no readable box.
-        Ok(Refined { ran: true, ..out })
+        Ok(Refined {
+            ran: true,
+            witness,
+            ..out
+        })
     }
 }
 
@@ -497,6 +521,25 @@ mod tests {
 
     fn cfg() -> BoxRefineConfig {
         BoxRefineConfig::default()
+    }
+
+    /// The witness margin is the largest finite margin of the 3×3 points around the centre
+    /// (what `read_at` reads), never one beside them, on any even grid.
+    #[test]
+    fn centre_margin_reads_only_the_points_around_the_centre() {
+        for cells in [SEARCH_CELLS, 12] {
+            let n = cells * cells;
+            let c = cells / 2;
+            let mut m = vec![-3.0; n];
+            // A confident point two cells off the centre does not count.
+            m[c * cells + c + 2] = 9.0;
+            assert_eq!(centre_margin(&m), Some(-3.0), "{cells}");
+            m[(c - 1) * cells + c + 1] = 6.5;
+            m[c * cells + c] = f32::NAN;
+            assert_eq!(centre_margin(&m), Some(6.5), "{cells}");
+        }
+        assert_eq!(centre_margin(&[1.0; 15]), None);
+        assert_eq!(centre_margin(&[f32::NAN; 144]), None);
     }
 
     #[test]

@@ -369,6 +369,12 @@ pub struct TrackStateConfig {
     /// re-acquisition, an uncertain frame) and low-confidence confirmations always ask the
     /// verifier.
     pub drift_anchor: bool,
+    /// Let the learned box's head pass of the frame (`box_refine`, the same network and
+    /// first-frame template as the verifier) answer what it can: a periodic drift check
+    /// agrees, and a low-confidence frame is confirmed, without a verifier pass when the
+    /// head's foreground logit margin at the box reaches `redetection.verifier_threshold`.
+    /// It never disputes a box: below the bar the verifier is asked as before.
+    pub drift_head: bool,
 }
 
 impl Default for TrackStateConfig {
@@ -382,6 +388,7 @@ impl Default for TrackStateConfig {
             drift_recheck_frames: 3,
             verify_low_confidence: true,
             drift_anchor: true,
+            drift_head: true,
         }
     }
 }
@@ -1223,7 +1230,7 @@ mod tests {
                 k.name
             );
         }
-        assert_eq!(live_keys().count(), 24);
+        assert_eq!(live_keys().count(), 25);
     }
 
     #[test]

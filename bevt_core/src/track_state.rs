@@ -102,8 +102,11 @@ pub enum StateReason {
     Confirmed {
         /// This frame's confidence.
         confidence: f32,
-        /// The verifier's score at the box.
+        /// The verifier's score at the box (or the learned box head's margin there).
         score: f32,
+        /// The witness was the learned box's head pass of this frame
+        /// (`track_state.drift_head`), not a verifier pass.
+        head: bool,
     },
     /// Found again after `after` lost frames.
     Reacquired {
@@ -152,9 +155,21 @@ impl fmt::Display for StateReason {
                 f,
                 "target lost: the box drifted off the first frame's target (verifier score {score:.1} below {threshold:.1}); searching for {frames} frames"
             ),
-            Self::Confirmed { confidence, score } => write!(
+            Self::Confirmed {
+                confidence,
+                score,
+                head: false,
+            } => write!(
                 f,
                 "low confidence {confidence:.2}, but the verifier finds the target at the box (score {score:.1})"
+            ),
+            Self::Confirmed {
+                confidence,
+                score,
+                head: true,
+            } => write!(
+                f,
+                "low confidence {confidence:.2}, but the learned box's head finds the target at the box (score {score:.1})"
             ),
             Self::Reacquired { after } => write!(f, "re-acquired after {after} frames"),
         }
@@ -263,13 +278,18 @@ impl StateMachine {
     }
 
     /// A frame [`Self::track`] found unconfident (`uncertain`, not lost), overruled by the
-    /// verifier finding the target at the box with `score`: reported `tracking`. As for
+    /// verifier (or, `head`, the learned box's head) finding the target at the box with
+    /// `score`: reported `tracking`. As for
     /// [`Self::off_target`], the machine itself is unchanged (the unconfident frame still
     /// counts towards `lost_frames`).
-    pub fn confirmed(&self, confidence: f32, score: f32) -> (TrackState, StateReason) {
+    pub fn confirmed(&self, confidence: f32, score: f32, head: bool) -> (TrackState, StateReason) {
         (
             TrackState::Tracking,
-            StateReason::Confirmed { confidence, score },
+            StateReason::Confirmed {
+                confidence,
+                score,
+                head,
+            },
         )
     }
 
@@ -404,12 +424,19 @@ mod tests {
             ..TrackStateConfig::default()
         });
         assert_eq!(m.track(0.1).0, TrackState::Uncertain);
-        let (s, r) = m.confirmed(0.1, 6.23);
+        let (s, r) = m.confirmed(0.1, 6.23, false);
         assert_eq!(s, TrackState::Tracking);
         assert_eq!(m.state(), TrackState::Uncertain);
         assert_eq!(
             r.to_string(),
             "low confidence 0.10, but the verifier finds the target at the box (score 6.2)"
+        );
+        // The learned box's head as the witness says so.
+        let (s, r) = m.confirmed(0.1, 6.23, true);
+        assert_eq!(s, TrackState::Tracking);
+        assert_eq!(
+            r.to_string(),
+            "low confidence 0.10, but the learned box's head finds the target at the box (score 6.2)"
         );
         assert_eq!(m.track(0.1).0, TrackState::Lost);
     }

@@ -315,6 +315,9 @@ struct State {
     /// (`box_refine.report_center`): set when the head runs, held between its runs,
     /// dropped at a loss; (0, 0) without the stage.
     center_offset: (f32, f32),
+    /// The learned box's head margin at the box on this frame (`box_refine`, `Refined::witness`;
+    /// `None` when the head did not run): what `track_state.drift_head` lets answer a check.
+    head_witness: Option<f32>,
     min_scale: f32,
     max_scale: f32,
     confidence: ConfidenceModel,
@@ -819,6 +822,7 @@ impl BevtTracker {
             aspect: 1.0,
             size_factor: 1.0,
             center_offset: (0.0, 0.0),
+            head_witness: None,
             min_scale: min_scale.min(scale),
             max_scale: max_scale.max(scale),
             frame_w: frame.width(),
@@ -1065,6 +1069,7 @@ impl Tracker for BevtTracker {
         // The learned box on the filter (box_refine): the head's size and aspect read at the
         // filter's position, blended into the prior (the previous box moved by the scale
         // filter) when the head is confident and agrees; else the prior.
+        st.head_witness = None;
         if let Some(r) = self.refiner.as_mut() {
             let prior = if r.from_filter() {
                 st.target_size()
@@ -1072,6 +1077,7 @@ impl Tracker for BevtTracker {
                 st.box_size(st.scale)
             };
             let refined = r.refine(frame, st.pos, prior)?;
+            st.head_witness = refined.witness;
             if refined.taken {
                 st.take_box(refined.pos, refined.size, r.feeds_scale());
             }
@@ -1339,7 +1345,10 @@ mod tests {
         const HIDE: usize = 25;
         let seq = hidden_from(HIDE, 45);
         let run = |anchor: bool| {
-            let mut t = started(&seq, &drift_only(1, 0, anchor));
+            // The learned box's head answers checks too (next test): off, to see the anchor's.
+            let mut cfg = drift_only(1, 0, anchor);
+            cfg.track_state.drift_head = false;
+            let mut t = started(&seq, &cfg);
             let mut hidden_passes = 0;
             let mut states = Vec::new();
             for i in 1..seq.frames {
@@ -1370,6 +1379,54 @@ mod tests {
         assert!(
             passes_with <= hidden + (HIDE as u64) / 4,
             "{passes_with} passes with the anchor, {passes_without} without"
+        );
+    }
+
+    /// Issue 20's speed budget, as above for the learned box's head (`track_state.drift_head`,
+    /// the learned box on as by default, the frozen filter's answer off to isolate it): the
+    /// head's pass of the frame answers the periodic checks it confirms at the box, and none
+    /// on a hidden target (each hidden frame still costs its verifier pass), with every
+    /// frame's state the same as without it.
+    #[test]
+    fn the_learned_box_head_answers_drift_checks_only_on_the_visible_target() {
+        const HIDE: usize = 25;
+        let seq = hidden_from(HIDE, 45);
+        let run = |head: bool| {
+            let mut cfg = drift_only(1, 0, false);
+            cfg.track_state.drift_head = head;
+            assert_eq!(cfg.box_refine.mode, crate::config::BoxRefineMode::Nanotrack);
+            let mut t = started(&seq, &cfg);
+            let (mut visible, mut hidden) = (0, 0);
+            let mut states = Vec::new();
+            for i in 1..seq.frames {
+                let f = seq.frame(i);
+                let frame =
+                    Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+                let before = t.verifier_passes().unwrap();
+                let o = t.update(&frame).unwrap();
+                let n = t.verifier_passes().unwrap() - before;
+                if i > HIDE {
+                    hidden += n;
+                } else {
+                    visible += n;
+                }
+                states.push((o.state, o.reason));
+            }
+            (states, visible, hidden)
+        };
+        let (with, visible_with, hidden_with) = run(true);
+        let (without, visible_without, hidden_without) = run(false);
+        assert_eq!(with, without);
+        let hidden = (seq.frames - HIDE - 1) as u64;
+        assert_eq!(hidden_without, hidden);
+        assert_eq!(
+            hidden_with, hidden,
+            "the head answered a hidden frame's check"
+        );
+        assert_eq!(visible_without, HIDE as u64);
+        assert!(
+            visible_with <= (HIDE as u64) / 4,
+            "{visible_with} passes on the visible frames with the head, {visible_without} without"
         );
     }
 

@@ -385,8 +385,10 @@ fn the_calm_drift_check_comes_back_as_soon_as_the_filter_falls() {
     cfg.track_state.lost_threshold = 0.0;
     cfg.track_state.drift_check_frames = 15;
     // Every check a verifier pass, so that the passes show when the checks ran (the frozen
-    // first-frame filter would answer the calm target's checks without one).
+    // first-frame filter and the learned box's head would answer the calm target's checks
+    // without one).
     cfg.track_state.drift_anchor = false;
+    cfg.track_state.drift_head = false;
     let checks = |cfg: &TrackerConfig, seq: &SynthParams| {
         let run = bevt_tests::track_synthetic_passes(seq, cfg.clone(), seq.truth(0));
         let at: Vec<usize> = (1..=run.len()).filter(|&t| run[t - 1].2 > 0).collect();

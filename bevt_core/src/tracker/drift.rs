@@ -27,6 +27,12 @@
 //!   hit elsewhere in its region (twice the target's context) leaves the frame uncertain:
 //!   a box beside a small target still has the target in view.
 //!
+//! - with `track_state.drift_head` and the learned box on (`box_refine`), the head's pass of
+//!   the frame (the same network and template on a crop at the box) answers what it can
+//!   in the same way: a periodic check agrees, and a low-confidence frame is confirmed,
+//!   when the head's margin at the box reaches `redetection.verifier_threshold`. It never
+//!   disputes: below that bar the verifier is asked.
+//!
 //! The published confidence follows the reported state, so a ground station thresholding
 //! the confidence at `track_state.lost_threshold` sees what the state says: a disputed or
 //! drift-lost box publishes at most `lost_threshold · score / drift_threshold`, a confirmed
@@ -89,6 +95,18 @@ fn anchor_agrees(st: &mut State, spec: &TrackerSpec, best: usize) -> bool {
         Some((c, dist)) => c >= bar && dist <= ANCHOR_NEAR_CELLS,
         None => false,
     }
+}
+
+/// The learned box's head pass of this frame as a witness (`track_state.drift_head`): its
+/// largest foreground logit margin at the box when that reaches the re-acquisition bar
+/// (`redetection.verifier_threshold`). The head runs NanoTrack's network with the first
+/// frame's template, as the verifier does, on a crop centred on the box, so a margin at the
+/// bar there is what a verifier hit at the box would say; below it (or when the head did not
+/// run) `None`, and the verifier is asked.
+fn head_at_box(st: &State, spec: &TrackerSpec) -> Option<f32> {
+    let bar = spec.config.redetection.verifier_threshold;
+    st.head_witness
+        .filter(|m| spec.config.track_state.drift_head && *m >= bar)
 }
 
 /// Cells of the verifier's score map across its search region (NanoTrack: 255 px / 16).
@@ -160,9 +178,13 @@ pub(super) fn check(
         (TrackState::Uncertain, StateReason::LowConfidence { .. }) if t.verify_low_confidence => {
             st.drift = DriftCheck::default();
             let bar = spec.config.redetection.verifier_threshold;
-            return Ok(match found_at_box(st, frame, v, bar)? {
-                Some(s) => {
-                    let (state, reason) = st.states.confirmed(confidence, s);
+            let found = match head_at_box(st, spec) {
+                Some(m) => Some((m, true)),
+                None => found_at_box(st, frame, v, bar)?.map(|s| (s, false)),
+            };
+            return Ok(match found {
+                Some((s, head)) => {
+                    let (state, reason) = st.states.confirmed(confidence, s, head);
                     (state, reason, confidence.max(t.lost_threshold))
                 }
                 _ => unchanged,
@@ -190,7 +212,10 @@ pub(super) fn check(
         // and the re-check ask the verifier.
         let periodic = st.drift.since > 0 && st.drift.off.is_none();
         st.drift.since = 0;
-        if periodic && t.drift_anchor && anchor_agrees(st, spec, best) {
+        if periodic
+            && ((t.drift_anchor && anchor_agrees(st, spec, best))
+                || head_at_box(st, spec).is_some())
+        {
             st.drift.since += 1;
             lost::verified(st);
             return Ok(unchanged);

@@ -797,6 +797,7 @@ mod tests {
         let confirmed = StateReason::Confirmed {
             confidence: 0.27,
             score: 7.3,
+            head: false,
         };
         for learned in [true, false] {
             let (s, r) = status_of(&o(TrackState::Tracking, confirmed, learned));
