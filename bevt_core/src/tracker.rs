@@ -1361,6 +1361,34 @@ mod tests {
         (states, visible, hidden)
     }
 
+    /// A witness that answers drift checks (`with` it against `without`, each as
+    /// [`passes_around`] with checks every frame and `hide` the first hidden frame): the same
+    /// states frame for frame; every hidden frame still a verifier pass; without it every
+    /// visible frame a pass, with it at most a quarter of them (the first check and those
+    /// after a refused one still ask the verifier).
+    fn assert_answers_only_visible_checks(
+        seq: &SynthParams,
+        hide: usize,
+        with: (Vec<(TrackState, StateReason)>, u64, u64),
+        without: (Vec<(TrackState, StateReason)>, u64, u64),
+        witness: &str,
+    ) {
+        assert_eq!(with.0, without.0);
+        let hidden = (seq.frames - hide - 1) as u64;
+        assert_eq!(without.2, hidden);
+        assert_eq!(
+            with.2, hidden,
+            "the {witness} answered a hidden frame's check"
+        );
+        assert_eq!(without.1, hide as u64);
+        assert!(
+            with.1 <= (hide as u64) / 4,
+            "{} passes on the visible frames with the {witness}, {} without",
+            with.1,
+            without.1
+        );
+    }
+
     /// Issue 20's speed budget: the first frame's filter, frozen at initialisation, answers
     /// the periodic drift checks it confirms (`track_state.drift_anchor`), so they cost no
     /// verifier pass, and it confirms none on a hidden target: with checks every frame, the
@@ -1376,22 +1404,7 @@ mod tests {
             cfg.track_state.drift_head = false;
             passes_around(&seq, &cfg, HIDE)
         };
-        let (with, visible_with, hidden_with) = run(true);
-        let (without, visible_without, hidden_without) = run(false);
-        assert_eq!(with, without);
-        let hidden = (seq.frames - HIDE - 1) as u64;
-        assert_eq!(hidden_without, hidden);
-        assert_eq!(
-            hidden_with, hidden,
-            "the frozen filter answered a hidden frame's check"
-        );
-        // Without it every frame is a pass; with it most visible frames are not (the first
-        // check and those after a refused one still ask the verifier).
-        assert_eq!(visible_without, HIDE as u64);
-        assert!(
-            visible_with <= (HIDE as u64) / 4,
-            "{visible_with} passes on the visible frames with the anchor, {visible_without} without"
-        );
+        assert_answers_only_visible_checks(&seq, HIDE, run(true), run(false), "frozen filter");
     }
 
     /// Issue 20's speed budget, as above for the learned box's head (`track_state.drift_head`,
@@ -1409,20 +1422,7 @@ mod tests {
             assert_eq!(cfg.box_refine.mode, crate::config::BoxRefineMode::Nanotrack);
             passes_around(&seq, &cfg, HIDE)
         };
-        let (with, visible_with, hidden_with) = run(true);
-        let (without, visible_without, hidden_without) = run(false);
-        assert_eq!(with, without);
-        let hidden = (seq.frames - HIDE - 1) as u64;
-        assert_eq!(hidden_without, hidden);
-        assert_eq!(
-            hidden_with, hidden,
-            "the head answered a hidden frame's check"
-        );
-        assert_eq!(visible_without, HIDE as u64);
-        assert!(
-            visible_with <= (HIDE as u64) / 4,
-            "{visible_with} passes on the visible frames with the head, {visible_without} without"
-        );
+        assert_answers_only_visible_checks(&seq, HIDE, run(true), run(false), "head");
     }
 
     use crate::redetect::VerifierHit;
