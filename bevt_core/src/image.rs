@@ -480,6 +480,88 @@ fn sample_rect_into(
     }
 }
 
+/// Samples the square of side `region` frame pixels centred on `center` into `out` (side
+/// `out.side`, the frame's planes) by bilinear interpolation of the four nearest pixels,
+/// without low-pass filtering when downscaling, pixels outside the frame replicating the
+/// border: OpenCV's `resize(INTER_LINEAR)` of the region, the resampling NanoTrack's networks
+/// were trained on (pysot's `get_subwindow`) and OpenCV's TrackerNano feeds them. Reads four
+/// pixels per output pixel whatever the region's size, where [`Sampler`] box-averages the
+/// whole region first. Upscaling (`region ≤ out.side`) gives [`Sampler::sample`]'s bits (the
+/// same coordinates, weights and order of operations).
+pub fn sample_bilinear(frame: &Frame<'_>, center: Point2, region: f32, out: &mut Patch) {
+    sample_bilinear_into(frame, center, region, out);
+}
+
+/// [`sample_bilinear`]'s work (compiled for the baseline and with AVX2 + FMA).
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
+fn sample_bilinear_into(frame: &Frame<'_>, center: Point2, region: f32, out: &mut Patch) {
+    let side = out.side;
+    let planes = frame.format().planes();
+    out.planes = planes;
+    out.data.resize(side * side * planes, 0.0);
+    let k = region / side as f32;
+    let bpp = frame.format().bytes_per_pixel();
+    let offs = frame.format().rgb_offsets();
+    // Coordinates as `prepare` (box factor 1) and `sample_rect` compute them: relative to the
+    // prepared region's corner `o`, pixel centres at integers, clamped into that region (of
+    // `n` pixels), whose pixels outside the frame replicate its border.
+    let half = region / 2.0 + 2.0;
+    let taps = |c: f32, j: usize, len: usize| {
+        let o = (c - half).floor();
+        let n = ((c + half) - o).ceil().max(1.0);
+        let u = (c + (j as f32 + 0.5 - side as f32 / 2.0) * k - o) / 1.0 - 0.5;
+        let last = n - 1.0;
+        let u = if u.is_finite() && last.is_finite() {
+            u.clamp(0.0, last)
+        } else {
+            0.0
+        };
+        let i0 = u.floor();
+        let a = u - i0;
+        let i1 = (i0 + 1.0).min(last);
+        let at = |i: f32| {
+            let x = i + o;
+            if x.is_finite() {
+                x.clamp(0.0, (len - 1) as f32) as usize
+            } else {
+                0
+            }
+        };
+        if i1 == i0 {
+            // Both taps on the region's last pixel: one tap of weight (1 − a) + a.
+            (at(i0), at(i0), (1.0 - a) + a, 0.0)
+        } else {
+            (at(i0), at(i1), 1.0 - a, a)
+        }
+    };
+    let (fw, fh) = (frame.width(), frame.height());
+    let cols: Vec<(usize, usize, f32, f32)> = (0..side).map(|j| taps(center.x, j, fw)).collect();
+    // The columns grow with j, so one output row reads the frame bytes of `first..=last`.
+    let first = cols.iter().map(|c| c.0).min().unwrap_or(0);
+    let last = cols.iter().map(|c| c.1).max().unwrap_or(0);
+    let span = first * bpp..(last + 1) * bpp;
+    let data = frame.data();
+    let stride = frame.stride();
+    let n = side * side;
+    let mut blend = vec![0.0f32; span.len()];
+    for r in 0..side {
+        // Vertical pass over the span's bytes (all planes interleaved), then the horizontal.
+        let (y0, y1, w0, w1) = taps(center.y, r, fh);
+        let row0 = &data[y0 * stride + span.start..y0 * stride + span.end];
+        let row1 = &data[y1 * stride + span.start..y1 * stride + span.end];
+        for ((v, &a), &b) in blend.iter_mut().zip(row0).zip(row1) {
+            *v = w0 * f32::from(a) + w1 * f32::from(b);
+        }
+        for p in 0..planes {
+            let o = offs[p];
+            let dst = &mut out.data[p * n + r * side..p * n + (r + 1) * side];
+            for (d, &(x0, x1, v0, v1)) in dst.iter_mut().zip(&cols) {
+                *d = v0 * blend[(x0 - first) * bpp + o] + v1 * blend[(x1 - first) * bpp + o];
+            }
+        }
+    }
+}
+
 /// Adds a u16 row-sum batch into the u32 sums and clears it.
 #[inline(always)] // into each clone of `prepare_into`
 fn flush(acc16: &mut [u16], acc32: &mut [u32]) {
@@ -652,6 +734,104 @@ mod tests {
                 let want = d[(r + 4) * w + col + 8] as f32;
                 assert!((p.data[r * 16 + col] - want).abs() < 1e-3, "{r} {col}");
             }
+        }
+    }
+
+    #[test]
+    fn bilinear_sampling_is_opencv_inter_linear_of_the_region() {
+        let (w, h) = (40, 30);
+        let d = ramp(w, h);
+        let f = Frame::packed(&d, w, h, PixelFormat::Mono8).unwrap();
+        let px = |x: usize, y: usize| f32::from(d[y * w + x]);
+        // The identity: a region of the output's side on pixel edges gives the pixels.
+        let mut p = Patch::new(16, 1);
+        let c = Point2 { x: 16.0, y: 12.0 };
+        sample_bilinear(&f, c, 16.0, &mut p);
+        for r in 0..16 {
+            for col in 0..16 {
+                assert_eq!(p.data[r * 16 + col], px(col + 8, r + 4), "{r} {col}");
+            }
+        }
+        // Halving: output pixel j sits on source coordinate 2j + 0.5 (OpenCV's
+        // (j + 0.5)·2 − 0.5), the mean of two neighbours per axis, no wider footprint.
+        let mut p = Patch::new(8, 1);
+        sample_bilinear(&f, c, 16.0, &mut p);
+        for r in 0..8 {
+            for col in 0..8 {
+                let (x, y) = (8 + 2 * col, 4 + 2 * r);
+                let want = (px(x, y) + px(x + 1, y) + px(x, y + 1) + px(x + 1, y + 1)) / 4.0;
+                assert!((p.data[r * 8 + col] - want).abs() < 1e-4, "{r} {col}");
+            }
+        }
+    }
+
+    #[test]
+    fn bilinear_upscaling_gives_the_samplers_bits() {
+        // Where the sampler interpolates too (a region at most the patch's side), the two give
+        // the same values, bit for bit, inside the frame and across its borders.
+        let (w, h) = (64, 48);
+        let rgb: Vec<u8> = (0..w * h * 3).map(|i| ((i * 7919) % 251) as u8).collect();
+        let f = Frame::packed(&rgb, w, h, PixelFormat::Rgb8).unwrap();
+        let mut seed = 11u32;
+        let mut next = |lo: f32, hi: f32| {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            lo + (hi - lo) * (seed >> 8) as f32 / (1u32 << 24) as f32
+        };
+        for _ in 0..200 {
+            let side = 31 + (next(0.0, 40.0) as usize);
+            let region = next(2.0, side as f32);
+            let c = Point2 {
+                x: next(-20.0, 84.0),
+                y: next(-20.0, 68.0),
+            };
+            let mut s = Sampler::default();
+            s.prepare(&f, c, region, region, side);
+            let (mut a, mut b) = (Patch::new(side, 3), Patch::new(side, 3));
+            s.sample(c, region, &mut a);
+            sample_bilinear(&f, c, region, &mut b);
+            let bits = |p: &Patch| p.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&a), bits(&b), "{c:?} region {region} side {side}");
+        }
+    }
+
+    #[test]
+    fn bilinear_sampling_replicates_the_border_orders_planes_and_survives_hostile_input() {
+        let (w, h) = (8, 6);
+        let mut bgr = vec![0u8; w * h * 3];
+        for (i, px) in bgr.chunks_exact_mut(3).enumerate() {
+            px.copy_from_slice(&[10, (i % 200) as u8, 250]);
+        }
+        let f = Frame::packed(&bgr, w, h, PixelFormat::Bgr8).unwrap();
+        let mut p = Patch::new(4, 3);
+        // Far outside the top-left corner: every sample is pixel (0, 0), as RGB planes.
+        sample_bilinear(&f, Point2 { x: -50.0, y: -50.0 }, 4.0, &mut p);
+        assert!(p.plane(0).iter().all(|&v| v == 250.0));
+        assert!(p.plane(1).iter().all(|&v| v == 0.0));
+        assert!(p.plane(2).iter().all(|&v| v == 10.0));
+        // Non-finite centres and absurd regions sample inside the frame, without a panic.
+        for (c, region) in [
+            (
+                Point2 {
+                    x: f32::NAN,
+                    y: 3.0,
+                },
+                4.0,
+            ),
+            (
+                Point2 {
+                    x: 4.0,
+                    y: f32::INFINITY,
+                },
+                4.0,
+            ),
+            (Point2 { x: 4.0, y: 3.0 }, 1e30),
+            (Point2 { x: 4.0, y: 3.0 }, 0.0),
+        ] {
+            sample_bilinear(&f, c, region, &mut p);
+            assert!(
+                p.data.iter().all(|v| (0.0..=255.0).contains(v)),
+                "{c:?} {region}"
+            );
         }
     }
 
