@@ -182,6 +182,8 @@ pub struct Patch {
     cols: Vec<Taps>,
     rows: Vec<Taps>,
     tmp: Vec<f32>,
+    /// [`sample_bilinear`]'s per output column: the byte offsets of its two taps in a row.
+    col_bytes: Vec<[usize; 2]>,
 }
 
 impl Patch {
@@ -194,6 +196,7 @@ impl Patch {
             cols: Vec::with_capacity(side),
             rows: Vec::with_capacity(side),
             tmp: Vec::new(),
+            col_bytes: Vec::new(),
         }
     }
 
@@ -492,7 +495,9 @@ pub fn sample_bilinear(frame: &Frame<'_>, center: Point2, region: f32, out: &mut
     sample_bilinear_into(frame, center, region, out);
 }
 
-/// [`sample_bilinear`]'s work (compiled for the baseline and with AVX2 + FMA).
+/// [`sample_bilinear`]'s work (compiled for the baseline and with AVX2 + FMA). Allocates
+/// nothing once `out`'s scratch has grown: the column taps go to `out.cols` and their byte
+/// offsets to `out.col_bytes`, the blended rows to `out.tmp`.
 #[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
 fn sample_bilinear_into(frame: &Frame<'_>, center: Point2, region: f32, out: &mut Patch) {
     let side = out.side;
@@ -502,65 +507,89 @@ fn sample_bilinear_into(frame: &Frame<'_>, center: Point2, region: f32, out: &mu
     let k = region / side as f32;
     let bpp = frame.format().bytes_per_pixel();
     let offs = frame.format().rgb_offsets();
-    // Coordinates as `prepare` (box factor 1) and `sample_rect` compute them: relative to the
-    // prepared region's corner `o`, pixel centres at integers, clamped into that region (of
-    // `n` pixels), whose pixels outside the frame replicate its border.
+    // `prepare`'s region at box factor 1 (corner `o`, `n` pixels, those outside the frame
+    // replicating its border) and `sample_rect`'s interpolating taps in it ([`Taps::new`]
+    // with a footprint of one pixel), so enlarging crops get the sampler's bits.
     let half = region / 2.0 + 2.0;
-    let taps = |c: f32, j: usize, len: usize| {
+    let corner = |c: f32| {
         let o = (c - half).floor();
         let n = ((c + half) - o).ceil().max(1.0);
+        // A region far beyond any frame is clamped to it anyway.
+        let n = if n.is_finite() {
+            n.min(MAX_REGION_PX)
+        } else {
+            1.0
+        };
+        (o, n as usize)
+    };
+    let tap = |c: f32, (o, n): (f32, usize), j: usize| {
         let u = (c + (j as f32 + 0.5 - side as f32 / 2.0) * k - o) / 1.0 - 0.5;
-        let last = n - 1.0;
-        let u = if u.is_finite() && last.is_finite() {
-            u.clamp(0.0, last)
+        Taps::new(if u.is_finite() { u } else { 0.0 }, 1.0, n)
+    };
+    // Frame pixel of tap `t` (clamped: the region's replicated border).
+    let pixel = |t: &Taps, i: usize, o: f32, len: usize| {
+        let x = (t.start + i.min(t.len.saturating_sub(1))) as f32 + o;
+        if x.is_finite() {
+            x.clamp(0.0, (len - 1) as f32) as usize
         } else {
-            0.0
-        };
-        let i0 = u.floor();
-        let a = u - i0;
-        let i1 = (i0 + 1.0).min(last);
-        let at = |i: f32| {
-            let x = i + o;
-            if x.is_finite() {
-                x.clamp(0.0, (len - 1) as f32) as usize
-            } else {
-                0
-            }
-        };
-        if i1 == i0 {
-            // Both taps on the region's last pixel: one tap of weight (1 − a) + a.
-            (at(i0), at(i0), (1.0 - a) + a, 0.0)
-        } else {
-            (at(i0), at(i1), 1.0 - a, a)
+            0
         }
     };
     let (fw, fh) = (frame.width(), frame.height());
-    let cols: Vec<(usize, usize, f32, f32)> = (0..side).map(|j| taps(center.x, j, fw)).collect();
-    // The columns grow with j, so one output row reads the frame bytes of `first..=last`.
-    let first = cols.iter().map(|c| c.0).min().unwrap_or(0);
-    let last = cols.iter().map(|c| c.1).max().unwrap_or(0);
+    let (cx, cy) = (corner(center.x), corner(center.y));
+    out.cols.clear();
+    out.cols.extend((0..side).map(|j| tap(center.x, cx, j)));
+    // The columns grow with j: one output row reads the frame bytes of `first..=last`.
+    let first = out.cols.first().map_or(0, |t| pixel(t, 0, cx.0, fw));
+    let last = out.cols.last().map_or(0, |t| pixel(t, 1, cx.0, fw));
     let span = first * bpp..(last + 1) * bpp;
+    out.col_bytes.clear();
+    out.col_bytes.extend(
+        out.cols
+            .iter()
+            .map(|t| [0, 1].map(|i| (pixel(t, i, cx.0, fw) - first) * bpp)),
+    );
+    out.tmp.clear();
+    out.tmp.resize(span.len(), 0.0);
     let data = frame.data();
     let stride = frame.stride();
     let n = side * side;
-    let mut blend = vec![0.0f32; span.len()];
     for r in 0..side {
-        // Vertical pass over the span's bytes (all planes interleaved), then the horizontal.
-        let (y0, y1, w0, w1) = taps(center.y, r, fh);
-        let row0 = &data[y0 * stride + span.start..y0 * stride + span.end];
-        let row1 = &data[y1 * stride + span.start..y1 * stride + span.end];
-        for ((v, &a), &b) in blend.iter_mut().zip(row0).zip(row1) {
-            *v = w0 * f32::from(a) + w1 * f32::from(b);
+        // Vertical pass over the span's bytes (all planes interleaved), then the horizontal,
+        // each as `sample_rect` sums its taps: `w₀·a` or `w₀·a + w₁·b`.
+        let rt = tap(center.y, cy, r);
+        let row = |i: usize| {
+            let y = pixel(&rt, i, cy.0, fh);
+            &data[y * stride + span.start..y * stride + span.end]
+        };
+        let (row0, row1, w0, w1) = (row(0), row(1), rt.w[0], rt.w[1]);
+        if rt.len > 1 {
+            for ((v, &a), &b) in out.tmp.iter_mut().zip(row0).zip(row1) {
+                *v = w0 * f32::from(a) + w1 * f32::from(b);
+            }
+        } else {
+            for (v, &a) in out.tmp.iter_mut().zip(row0) {
+                *v = w0 * f32::from(a);
+            }
         }
         for p in 0..planes {
             let o = offs[p];
             let dst = &mut out.data[p * n + r * side..p * n + (r + 1) * side];
-            for (d, &(x0, x1, v0, v1)) in dst.iter_mut().zip(&cols) {
-                *d = v0 * blend[(x0 - first) * bpp + o] + v1 * blend[(x1 - first) * bpp + o];
+            for ((d, t), &[b0, b1]) in dst.iter_mut().zip(&out.cols).zip(&out.col_bytes) {
+                let a = out.tmp[b0 + o];
+                *d = if t.len > 1 {
+                    t.w[0] * a + t.w[1] * out.tmp[b1 + o]
+                } else {
+                    t.w[0] * a
+                };
             }
         }
     }
 }
+
+/// Largest region side [`sample_bilinear`] lays out, pixels: four times the largest frame
+/// side, so a hostile region is clamped to the frame, never sized by itself.
+const MAX_REGION_PX: f32 = (4 * MAX_FRAME_SIDE) as f32;
 
 /// Adds a u16 row-sum batch into the u32 sums and clears it.
 #[inline(always)] // into each clone of `prepare_into`
