@@ -5,6 +5,7 @@
 //! `matrixmultiply` crate's blocked kernels); depthwise convolutions through
 //! [`crate::redetect::dwconv`].
 
+use crate::redetect::dwconv::copy_short;
 use nalgebra::{DMatrixView, DMatrixViewMut};
 
 /// `c[m×n] = alpha · a[m×k] · b[k×n] + beta · c`, each operand given by its slice and its
@@ -401,7 +402,7 @@ pub(super) fn pointwise(
     for j in (0..plane).step_by(nt) {
         let cols = nt.min(plane - j);
         for (p, t) in tile.chunks_exact_mut(cols).take(k).enumerate() {
-            t.copy_from_slice(&x[p * plane + j..p * plane + j + cols]);
+            copy_short(t, &x[p * plane + j..p * plane + j + cols]);
         }
         rows_product((m, k, cols), wp, tile, cols, bias, act, &mut y[j..], plane);
     }
