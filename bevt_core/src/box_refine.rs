@@ -32,7 +32,7 @@ use crate::config::{BoxPrior, BoxRead, BoxRefineConfig, BoxRefineMode, TrackerSp
 use crate::error::TrackError;
 use crate::geometry::{BBox, Point2, Size2};
 use crate::image::Frame;
-use crate::redetect::nano::{NanoVerifier, SEARCH_CELLS, TEMPLATE_SIDE};
+use crate::redetect::nano::{NanoVerifier, CENTRE_RADIUS, SEARCH_CELLS, TEMPLATE_SIDE};
 use crate::redetect::{context_side, Verifier};
 
 /// Backbone stride, crop pixels.
@@ -146,7 +146,7 @@ pub fn select(
 const MAX_CALIBRATION: f32 = 1.5;
 
 /// Grid points on each side of the crop centre that [`read_at`] averages (1: 3×3).
-const READ_RADIUS: usize = 1;
+const READ_RADIUS: usize = CENTRE_RADIUS;
 
 /// The head's box read at the crop centre (the filter's position): the foreground-probability
 /// weighted mean of the boxes (left/top/right/bottom corners) regressed at the
@@ -442,7 +442,13 @@ impl BoxRefiner {
         let cells = self.cfg.search_cells;
         let side = 16 * cells - 1;
         let s_x = s_z * side as f32 / TEMPLATE_SIDE as f32;
-        let Some((margins, loc)) = self.net.score_maps_sized(frame, pos, s_x, cells)? else {
+        // `read: filter` and the witness read only the points around the centre: the head
+        // computes only those (the same values), `peak` needs the whole maps.
+        let maps = match read {
+            BoxRead::Filter => self.net.centre_maps_sized(frame, pos, s_x, cells)?,
+            BoxRead::Peak => self.net.score_maps_sized(frame, pos, s_x, cells)?,
+        };
+        let Some((margins, loc)) = maps else {
             return Ok((None, None));
         };
         let scale_z = TEMPLATE_SIDE as f32 / s_z;

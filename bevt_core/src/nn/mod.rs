@@ -21,6 +21,7 @@
 
 pub mod onnx;
 pub(crate) mod ops;
+pub(crate) mod window;
 
 use crate::redetect::dwconv;
 use onnx::{Attr, Data, Model, Node, Tensor};
@@ -1310,6 +1311,106 @@ mod tests {
     /// An activation is fused into the step that wrote its input only when nothing else
     /// reads that value: `relu(conv) + conv` keeps the convolution's own values for the sum,
     /// and `relu(conv)` alone equals the formula (fused).
+    /// A tower like NanoTrack's head (depthwise 3 × 3 and pointwise convolutions with
+    /// activations, a dense 3 × 3 one last) on 6 × 6 maps.
+    fn tower() -> Model {
+        let p1 = [("pads", ints(&[1, 1, 1, 1]))];
+        let dw = |c: i64| [("pads", ints(&[1, 1, 1, 1])), ("group", Attr::Int(c))];
+        model(
+            vec![
+                node("Conv", &["x", "k1", "b1"], "d1", &dw(4)),
+                node("Clip", &["d1", "lo", "hi"], "c1", &[]),
+                node("Conv", &["c1", "k2", "b2"], "p1", &[]),
+                node("Conv", &["p1", "k3", "b3"], "d2", &dw(6)),
+                node("Relu", &["d2"], "r2", &[]),
+                node("Conv", &["r2", "k4", "b4"], "p2", &[]),
+                node("Conv", &["p2", "k5", "b5"], "d3", &dw(6)),
+                node("Conv", &["d3", "k6", "b6"], "y", &p1),
+                node("Exp", &["y"], "e", &[]),
+            ],
+            vec![
+                ("k1", f32s(&[4, 1, 3, 3], 1)),
+                ("b1", f32s(&[4], 2)),
+                (
+                    "lo",
+                    Tensor {
+                        dims: vec![],
+                        data: Data::F32(vec![0.0]),
+                    },
+                ),
+                (
+                    "hi",
+                    Tensor {
+                        dims: vec![],
+                        data: Data::F32(vec![0.8]),
+                    },
+                ),
+                ("k2", f32s(&[6, 4, 1, 1], 3)),
+                ("b2", f32s(&[6], 4)),
+                ("k3", f32s(&[6, 1, 3, 3], 5)),
+                ("b3", f32s(&[6], 6)),
+                ("k4", f32s(&[6, 6, 1, 1], 7)),
+                ("b4", f32s(&[6], 8)),
+                ("k5", f32s(&[6, 1, 3, 3], 9)),
+                ("b5", f32s(&[6], 10)),
+                ("k6", f32s(&[2, 6, 3, 3], 11)),
+                ("b6", f32s(&[2], 12)),
+            ],
+            &["x"],
+        )
+    }
+
+    /// A window of the output is the whole network's values there, bit for bit: at the
+    /// centre, at both edges (where the layers keep their zero padding on one side only),
+    /// one point, and the whole map (the model unchanged).
+    #[test]
+    fn a_windowed_network_gives_the_whole_networks_bits_in_its_window() {
+        use window::{windowed, Span};
+        let m = tower();
+        let x = f32s(&[1, 4, 6, 6], 13).to_f32();
+        let bits = |v: &[f32]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        for out in ["y", "e"] {
+            let whole = run(&m, &[("x", &[1, 4, 6, 6], &x)], out);
+            for (lo, hi) in [(2, 3), (0, 1), (4, 5), (3, 3), (1, 4), (0, 5)] {
+                let w = windowed(&m, out, 6, Span { lo, hi });
+                let w = w.unwrap_or_else(|| panic!("{out} {lo}..={hi} not windowed"));
+                let got = run(&w, &[("x", &[1, 4, 6, 6], &x)], out);
+                let n = hi - lo + 1;
+                let mut want = Vec::new();
+                for c in 0..2 {
+                    for r in lo..=hi {
+                        want.extend_from_slice(
+                            &whole[(c * 6 + r) * 6 + lo..(c * 6 + r) * 6 + hi + 1],
+                        );
+                    }
+                }
+                assert_eq!(got.len(), 2 * n * n, "{out} {lo}..={hi}");
+                assert_eq!(bits(&got), bits(&want), "{out} {lo}..={hi}");
+            }
+        }
+    }
+
+    /// What cannot be windowed is refused, not computed wrongly: a window reaching the
+    /// graph input before any layer needs its whole map, an operator that is not local
+    /// (a reshape), a strided convolution, a span outside the map.
+    #[test]
+    fn a_window_through_what_is_not_local_is_refused() {
+        use window::{windowed, Span};
+        let m = tower();
+        assert!(windowed(&m, "y", 6, Span { lo: 2, hi: 3 }).is_some());
+        // A corner point needs only 5 × 5 of the input; from d2 on, one point 5 × 5 of x.
+        assert!(windowed(&m, "y", 6, Span { lo: 0, hi: 0 }).is_none());
+        assert!(windowed(&m, "d2", 6, Span { lo: 2, hi: 2 }).is_none());
+        assert!(windowed(&m, "y", 6, Span { lo: 4, hi: 6 }).is_none());
+        assert!(windowed(&m, "y", 6, Span { lo: 3, hi: 2 }).is_none());
+        let mut r = m.clone();
+        r.nodes[6] = node("Reshape", &["p2", "shape"], "d3", &[]);
+        assert!(windowed(&r, "y", 6, Span { lo: 2, hi: 3 }).is_none());
+        let mut s = m.clone();
+        s.nodes[7].attrs.insert("strides".into(), ints(&[2, 2]));
+        assert!(windowed(&s, "y", 6, Span { lo: 2, hi: 3 }).is_none());
+    }
+
     #[test]
     fn a_convolution_by_rows_applies_its_fused_activation() {
         let (c, h, w, m) = (3, 19, 37, 11);

@@ -182,7 +182,15 @@ struct SizedPlans {
     search: Planned,
     cls: Planned,
     reg: Planned,
+    /// Both branches computed only for the [`CENTRE_RADIUS`] window around the map's centre
+    /// ([`nn::window`]); `None` for a head that cannot be windowed (the whole maps then).
+    centre: Option<(Planned, Planned)>,
 }
+
+/// The grid points around a search map's centre that [`NanoVerifier::centre_maps_sized`]
+/// computes: `(2·CENTRE_RADIUS + 1)²`, those `crate::box_refine` reads at the filter's
+/// position.
+pub const CENTRE_RADIUS: usize = 1;
 
 impl Plans {
     /// The plans for search maps of `cells × cells` (planned once per process and size).
@@ -214,10 +222,29 @@ impl Plans {
                 outputs,
             )
         };
+        // The centre window of both branches, when the head's layers after its channel
+        // attention are local (NanoTrack v2's are) and the window needs them whole before
+        // the attention. Any planning error of the windowed graphs falls back to the whole
+        // maps: they are an optimisation, never a requirement.
+        let c = cells / 2;
+        let span = nn::window::Span {
+            lo: c.saturating_sub(CENTRE_RADIUS),
+            hi: c + CENTRE_RADIUS,
+        };
+        let windowed = |output: &'static str| {
+            let w = nn::window::windowed(&head, output, cells, span)?;
+            let inputs: [(&str, &[usize]); 2] = [
+                ("input1", &[1, CHANNELS, t, t]),
+                ("input2", &[1, CHANNELS, cells, cells]),
+            ];
+            Planned::new(&w, HEAD_KEY, &m.head_name, &inputs, &[output]).ok()
+        };
+        let centre = windowed("output1").zip(windowed("output2"));
         let p = Arc::new(SizedPlans {
             search,
             cls: head_plan(&["output1"])?,
             reg: head_plan(&["output2"])?,
+            centre,
         });
         // A process uses one or two sizes; the bound keeps a misuse from growing it.
         if cache.len() >= MAX_CACHED_PLANS {
@@ -264,6 +291,8 @@ struct SizedNets {
     search: Net,
     cls: Net,
     reg: Net,
+    /// The centre window's branches (see [`SizedPlans`]).
+    centre: Option<(Net, Net)>,
 }
 
 /// Plans by `(verifier_backbone, verifier_head)` as configured (empty: embedded). Every
@@ -724,6 +753,20 @@ impl NanoVerifier {
     }
 }
 
+/// Planes of `w × w` values (a window of the maps) placed at rows and columns `lo..lo + w`
+/// of `cells × cells` planes whose other values are NaN.
+fn embed(window: &[f32], w: usize, cells: usize, lo: usize) -> Vec<f32> {
+    let planes = window.len() / (w * w);
+    let mut out = vec![f32::NAN; planes * cells * cells];
+    for (p, plane) in window.chunks_exact(w * w).enumerate() {
+        for (r, row) in plane.chunks_exact(w).enumerate() {
+            let at = (p * cells + lo + r) * cells + lo;
+            out[at..at + w].copy_from_slice(row);
+        }
+    }
+    out
+}
+
 /// Per grid point the foreground logit margin (foreground − background) of the head's
 /// classification output `[1, 2, n, n]` (background plane first).
 fn margins_of(logits: &[f32]) -> Vec<f32> {
@@ -816,6 +859,41 @@ impl NanoVerifier {
         if cells == SEARCH_CELLS {
             return self.score_maps(frame, center, side);
         }
+        self.maps_sized(frame, center, side, cells, false)
+    }
+
+    /// [`NanoVerifier::score_maps_sized`] where only the `(2·CENTRE_RADIUS + 1)²` grid
+    /// points around the maps' centre are wanted: those points carry the same values, bit
+    /// for bit, every other point is NaN (not computed). The head's two towers then compute
+    /// only what those points depend on (`nn::window`: about half their work at 12
+    /// cells). A head that cannot be windowed (another model's) and 16 cells give the
+    /// whole maps.
+    ///
+    /// # Errors
+    /// As [`NanoVerifier::score_maps_sized`].
+    pub fn centre_maps_sized(
+        &mut self,
+        frame: &Frame<'_>,
+        center: Point2,
+        side: f32,
+        cells: usize,
+    ) -> Result<Option<HeadMaps>, TrackError> {
+        if cells == SEARCH_CELLS {
+            return self.score_maps(frame, center, side);
+        }
+        self.maps_sized(frame, center, side, cells, true)
+    }
+
+    /// [`NanoVerifier::score_maps_sized`] (`centre`: [`NanoVerifier::centre_maps_sized`])
+    /// for `cells` other than 16.
+    fn maps_sized(
+        &mut self,
+        frame: &Frame<'_>,
+        center: Point2,
+        side: f32,
+        cells: usize,
+        centre: bool,
+    ) -> Result<Option<HeadMaps>, TrackError> {
         let path = self.backend.paths().0.to_string();
         let run_err = |reason: String| NanoError::Run {
             key: BACKBONE_KEY,
@@ -848,6 +926,7 @@ impl NanoVerifier {
                 search: Net::new(&p.search),
                 cls: Net::new(&p.cls),
                 reg: Net::new(&p.reg),
+                centre: p.centre.as_ref().map(|(c, r)| (Net::new(c), Net::new(r))),
             }));
         }
         let out = STRIDE_PX * cells - 1;
@@ -867,6 +946,20 @@ impl NanoVerifier {
             (&[1, CHANNELS, t, t], &self.template),
             (&[1, CHANNELS, cells, cells], &feat),
         ];
+        if let Some((cls, reg)) = n.centre.as_mut().filter(|_| centre) {
+            let w = 2 * CENTRE_RADIUS + 1;
+            let logits = cls
+                .run(&inputs, &[("output1", &[1, 2, w, w])])?
+                .swap_remove(0);
+            let loc = reg
+                .run(&inputs, &[("output2", &[1, 4, w, w])])?
+                .swap_remove(0);
+            let lo = cells / 2 - CENTRE_RADIUS;
+            return Ok(Some((
+                embed(&margins_of(&logits), w, cells, lo),
+                embed(&loc, w, cells, lo),
+            )));
+        }
         let logits = n
             .cls
             .run(&inputs, &[("output1", &[1, 2, cells, cells])])?
@@ -877,6 +970,17 @@ impl NanoVerifier {
             .swap_remove(0);
         let margins = margins_of(&logits);
         Ok(Some((margins, loc)))
+    }
+
+    /// Whether the last sized maps' plans include the windowed centre branches (`None`:
+    /// no sized maps yet, or ONNX Runtime). For tests.
+    #[cfg(test)]
+    fn backend_centre_windowed(&self) -> Option<bool> {
+        match &self.backend {
+            Backend::Native { sized, .. } => sized.as_ref().map(|n| n.centre.is_some()),
+            #[cfg(feature = "cnn")]
+            Backend::Ort(_) => None,
+        }
     }
 
     /// True once a template is set.
@@ -1100,6 +1204,63 @@ mod tests {
             .score_maps_sized(&frame, c, f32::NAN, 12)
             .unwrap()
             .is_none());
+    }
+
+    /// The centre maps are the whole maps' values at the `(2·CENTRE_RADIUS + 1)²` points
+    /// around the centre, bit for bit, and NaN elsewhere, at every size the learned box can
+    /// ask for (NanoTrack v2's head is windowed at each: none falls back to the whole maps
+    /// unseen); at 16 cells they are the whole maps.
+    #[test]
+    fn centre_maps_are_the_whole_maps_bits_at_the_centre() {
+        use crate::eval::synth::SynthParams;
+        use crate::image::PixelFormat;
+        let seq = SynthParams::default();
+        let f = seq.frame(3);
+        let frame = Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+        let (c, (w, h)) = (f.truth.center(), (f.truth.w, f.truth.h));
+        let f0 = seq.frame(0);
+        let frame0 = Frame::packed(&f0.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+        let mut v = NanoVerifier::new("", "").unwrap();
+        v.set_template(&frame0, f0.truth.center(), w, h).unwrap();
+        let bits = |v: &[f32]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let s_z = context_side(w, h);
+        // Off the target too: the values must agree wherever the crop is.
+        let off = Point2 {
+            x: c.x + 17.0,
+            y: c.y - 9.0,
+        };
+        for cells in [4usize, 6, 8, 10, 12, 14, 16] {
+            let side = s_z * (16 * cells - 1) as f32 / TEMPLATE_SIDE as f32;
+            for at in [c, off] {
+                let whole = v
+                    .score_maps_sized(&frame, at, side, cells)
+                    .unwrap()
+                    .unwrap();
+                let centre = v
+                    .centre_maps_sized(&frame, at, side, cells)
+                    .unwrap()
+                    .unwrap();
+                if cells == SEARCH_CELLS {
+                    assert_eq!(bits(&centre.0), bits(&whole.0));
+                    assert_eq!(bits(&centre.1), bits(&whole.1));
+                    continue;
+                }
+                let (lo, hi) = (cells / 2 - CENTRE_RADIUS, cells / 2 + CENTRE_RADIUS);
+                for (mine, all) in [(&centre.0, &whole.0), (&centre.1, &whole.1)] {
+                    assert_eq!(mine.len(), all.len(), "{cells} cells");
+                    for (i, (m, a)) in mine.iter().zip(all.iter()).enumerate() {
+                        let (j, k) = ((i / cells) % cells, i % cells);
+                        if (lo..=hi).contains(&j) && (lo..=hi).contains(&k) {
+                            assert_eq!(m.to_bits(), a.to_bits(), "{cells} cells, point {i}");
+                        } else {
+                            assert!(m.is_nan(), "{cells} cells, point {i} computed");
+                        }
+                    }
+                }
+                let n = v.backend_centre_windowed();
+                assert_eq!(n, Some(true), "{cells} cells: the head was not windowed");
+            }
+        }
     }
 }
 
