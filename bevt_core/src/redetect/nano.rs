@@ -856,9 +856,6 @@ impl NanoVerifier {
         side: f32,
         cells: usize,
     ) -> Result<Option<HeadMaps>, TrackError> {
-        if cells == SEARCH_CELLS {
-            return self.score_maps(frame, center, side);
-        }
         self.maps_sized(frame, center, side, cells, false)
     }
 
@@ -878,14 +875,11 @@ impl NanoVerifier {
         side: f32,
         cells: usize,
     ) -> Result<Option<HeadMaps>, TrackError> {
-        if cells == SEARCH_CELLS {
-            return self.score_maps(frame, center, side);
-        }
         self.maps_sized(frame, center, side, cells, true)
     }
 
-    /// [`NanoVerifier::score_maps_sized`] (`centre`: [`NanoVerifier::centre_maps_sized`])
-    /// for `cells` other than 16.
+    /// [`NanoVerifier::score_maps_sized`] (`centre`: [`NanoVerifier::centre_maps_sized`]);
+    /// 16 cells are [`NanoVerifier::score_maps`] in both.
     fn maps_sized(
         &mut self,
         frame: &Frame<'_>,
@@ -894,6 +888,9 @@ impl NanoVerifier {
         cells: usize,
         centre: bool,
     ) -> Result<Option<HeadMaps>, TrackError> {
+        if cells == SEARCH_CELLS {
+            return self.score_maps(frame, center, side);
+        }
         let path = self.backend.paths().0.to_string();
         let run_err = |reason: String| NanoError::Run {
             key: BACKBONE_KEY,
@@ -1061,6 +1058,7 @@ impl Verifier for NanoVerifier {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::image::PixelFormat;
 
     /// The head as one network (how it ran before its branches were planned apart): the
     /// template and search features' margins and box distances.
@@ -1153,17 +1151,22 @@ mod tests {
         );
     }
 
+    /// Frame `i` of the default synthetic sequence: its RGB pixels, its size, and the target's
+    /// centre and size.
+    fn synth(i: usize) -> (Vec<u8>, (usize, usize), Point2, (f32, f32)) {
+        let seq = crate::eval::synth::SynthParams::default();
+        let f = seq.frame(i);
+        let t = (f.truth.center(), (f.truth.w, f.truth.h));
+        (f.rgb, (seq.width, seq.height), t.0, t.1)
+    }
+
     /// A smaller search crop (12 cells, 191 pixels) still finds a textured target at its
     /// centre and regresses a box of about its size, like the 255-pixel one; odd or
     /// out-of-range sides are errors, a degenerate crop side gives nothing.
     #[test]
     fn smaller_search_maps_find_the_target_at_the_crop_centre() {
-        use crate::eval::synth::SynthParams;
-        use crate::image::PixelFormat;
-        let seq = SynthParams::default();
-        let f = seq.frame(0);
-        let frame = Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
-        let (c, (w, h)) = (f.truth.center(), (f.truth.w, f.truth.h));
+        let (px, size, c, (w, h)) = synth(0);
+        let frame = Frame::packed(&px, size.0, size.1, PixelFormat::Rgb8).unwrap();
         let mut v = NanoVerifier::new("", "").unwrap();
         assert!(
             v.score_maps_sized(&frame, c, 100.0, 12).unwrap().is_none(),
@@ -1212,16 +1215,12 @@ mod tests {
     /// unseen); at 16 cells they are the whole maps.
     #[test]
     fn centre_maps_are_the_whole_maps_bits_at_the_centre() {
-        use crate::eval::synth::SynthParams;
-        use crate::image::PixelFormat;
-        let seq = SynthParams::default();
-        let f = seq.frame(3);
-        let frame = Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
-        let (c, (w, h)) = (f.truth.center(), (f.truth.w, f.truth.h));
-        let f0 = seq.frame(0);
-        let frame0 = Frame::packed(&f0.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+        let (px0, size, c0, (w, h)) = synth(0);
+        let frame0 = Frame::packed(&px0, size.0, size.1, PixelFormat::Rgb8).unwrap();
+        let (px, _, c, _) = synth(3);
+        let frame = Frame::packed(&px, size.0, size.1, PixelFormat::Rgb8).unwrap();
         let mut v = NanoVerifier::new("", "").unwrap();
-        v.set_template(&frame0, f0.truth.center(), w, h).unwrap();
+        v.set_template(&frame0, c0, w, h).unwrap();
         let bits = |v: &[f32]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
         let s_z = context_side(w, h);
         // Off the target too: the values must agree wherever the crop is.
