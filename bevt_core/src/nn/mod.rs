@@ -12,7 +12,9 @@
 //! `Mul`, `Div` (numpy broadcasting), `GlobalAveragePool`, `Reshape`, `Flatten`,
 //! `Transpose`, `Identity`, `Constant`. Another operator, a computed convolution kernel or a
 //! dilation is a clear error at plan time. Only the nodes the requested outputs depend on
-//! are planned, so one head can be planned as its classification branch alone.
+//! are planned, so one head can be planned as its classification branch alone, and
+//! `window::windowed` rewrites a network so that its local layers compute only the output
+//! points a caller reads (the learned box's 3 × 3 of NanoTrack's head), the same bits.
 //!
 //! Why not tract (what ran these networks before): it was the largest part of the build
 //! (tract-core, -linalg, -data and the ONNX import, about half of a cold release build's
