@@ -231,15 +231,20 @@ impl Plans {
             lo: c.saturating_sub(CENTRE_RADIUS),
             hi: c + CENTRE_RADIUS,
         };
-        let windowed = |output: &'static str| {
+        let side = 2 * CENTRE_RADIUS + 1;
+        let windowed = |output: &'static str, planes: usize| {
             let w = nn::window::windowed(&head, output, cells, span)?;
             let inputs: [(&str, &[usize]); 2] = [
                 ("input1", &[1, CHANNELS, t, t]),
                 ("input2", &[1, CHANNELS, cells, cells]),
             ];
-            Planned::new(&w, HEAD_KEY, &m.head_name, &inputs, &[output]).ok()
+            let p = Planned::new(&w, HEAD_KEY, &m.head_name, &inputs, &[output]).ok()?;
+            // Another head whose window plans to other shapes than the maps' would fail
+            // every run: it gets the whole maps instead.
+            let want: &[usize] = &[1, planes, side, side];
+            p.plan.output_shapes().eq([want]).then_some(p)
         };
-        let centre = windowed("output1").zip(windowed("output2"));
+        let centre = windowed("output1", 2).zip(windowed("output2", 4));
         let p = Arc::new(SizedPlans {
             search,
             cls: head_plan(&["output1"])?,
@@ -944,7 +949,7 @@ impl NanoVerifier {
             (&[1, CHANNELS, cells, cells], &feat),
         ];
         if let Some((cls, reg)) = n.centre.as_mut().filter(|_| centre) {
-            let w = 2 * CENTRE_RADIUS + 1;
+            let w = 2 * CENTRE_RADIUS + 1; // the shapes checked when planned
             let logits = cls
                 .run(&inputs, &[("output1", &[1, 2, w, w])])?
                 .swap_remove(0);
