@@ -21,6 +21,12 @@
 //!    4-wide SSE2 / NEON;
 //! 3. the valid columns are copied to the output.
 //!
+//! Where each input row goes (its phase and offset: divisions by the strides) is worked out
+//! once per call, not per channel: on 12 × 12 maps those divisions cost more than the
+//! copies. On x86-64 CPUs with AVX-512 the kernel rows of 3 and 5 taps run on 16-value
+//! blocks (pulp's `x86::V4`, safe code), the wide buffer padded to whole blocks; each value
+//! is the same multiplies and adds in the same order as in the other rows, so the same bits.
+//!
 //! Tested against a naive reference here; the networks' outputs against ONNX Runtime's
 //! reference values (`tests/integration/verifier.rs`).
 
@@ -126,13 +132,19 @@ impl Geometry {
 pub struct Scratch {
     phases: Vec<f32>,
     wide: Vec<f32>,
+    /// Per input row read: its offset in a channel's plane, its base in the phases.
+    rows: Vec<(usize, usize)>,
+    /// Per column phase `r`: `r`, its first destination from a row's base, its count.
+    cols: Vec<(usize, usize, usize)>,
 }
 
 /// Depthwise convolution of `input` (`channels` planes of `in_h × in_w`, row-major) with
 /// `weights` (`channels` kernels of `k_h × k_w`) plus `bias` (one per channel) into `output`
 /// (`channels` planes of `out_h × out_w`), zero padding. Returns `false` (and leaves
 /// `output` alone) when a slice has the wrong length.
-#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
+///
+/// On x86-64 CPUs with AVX-512 the kernel rows of 3 and 5 taps run on 16-value blocks
+/// (safe code through pulp's `x86::V4`), each output the same operations in the same order: the same bits.
 pub fn depthwise(
     g: &Geometry,
     input: &[f32],
@@ -140,6 +152,20 @@ pub fn depthwise(
     bias: &[f32],
     output: &mut [f32],
     scratch: &mut Scratch,
+) -> bool {
+    depthwise_rows(g, input, weights, bias, output, scratch, true)
+}
+
+/// [`depthwise`], with the AVX-512 rows allowed (`wide`, where the CPU has them) or not.
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
+fn depthwise_rows(
+    g: &Geometry,
+    input: &[f32],
+    weights: &[f32],
+    bias: &[f32],
+    output: &mut [f32],
+    scratch: &mut Scratch,
+    wide: bool,
 ) -> bool {
     let taps = g.k_h * g.k_w;
     if input.len() != g.channels * g.in_plane()
@@ -152,10 +178,16 @@ pub fn depthwise(
     let (hq, wq) = (g.phase_h(), g.phase_w());
     let (sh, sw) = (g.stride_h, g.stride_w);
     let sub = hq * wq;
-    // Outputs computed per tap: the wide rows, the last one cut at out_w.
-    let span = (g.out_h - 1) * wq + g.out_w;
-    scratch.phases.resize(sh * sw * sub, 0.0);
+    // Outputs computed per tap: the wide rows, the last one cut at out_w, rounded up to whole
+    // blocks of `LANES` for the AVX-512 rows (the values past the last output are computed
+    // from the phases' zero slack and dropped).
+    let span = ((g.out_h - 1) * wq + g.out_w).next_multiple_of(LANES);
+    scratch.phases.resize(sh * sw * sub + LANES, 0.0);
     scratch.wide.resize(span, 0.0);
+    #[cfg(target_arch = "x86_64")]
+    let v4 = pulp::x86::V4::try_new().filter(|_| wide);
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = wide;
     let rows_read = hq * sh;
     let cols_read = wq * sw;
     // Padding and the columns and rows no tap reads stay zero for every channel: each
@@ -171,44 +203,66 @@ pub fn depthwise(
             ((ky % sh) * sw + kx % sw) * sub + (ky / sh) * wq + kx / sw
         })
         .collect();
+    // Where each input row's values go, worked out once for all channels (every channel's
+    // plane has the same layout; the divisions by the strides cost more per row than the
+    // copies of 12-value rows themselves): per input row its offset in the plane and its
+    // base in the phases; per column phase `r`, the first destination and the count.
+    scratch.rows.clear();
+    scratch.rows.extend(
+        (0..g.in_h)
+            .map(|y| (y, y + g.pad_top))
+            .take_while(|&(_, py)| py < rows_read)
+            .map(|(y, py)| (y * g.in_w, (py % sh) * sw * sub + (py / sh) * wq)),
+    );
+    scratch.cols.clear();
+    scratch.cols.extend((0..sw.min(x_end)).map(|r| {
+        let px = g.pad_left + r;
+        (r, (px % sw) * sub + px / sw, (x_end - r).div_ceil(sw))
+    }));
+    // Stride 2: pairs of input columns split to the two column phases at once; `a` takes
+    // the even input columns, `b` the odd ones (offsets from the row's base).
+    let (c0, c1) = (g.pad_left / 2, g.pad_left.div_ceil(2));
+    let pairs = x_end / 2;
+    let (a_at, b_at) = if g.pad_left.is_multiple_of(2) {
+        (c0, sub + c1)
+    } else {
+        (sub + c0, c1)
+    };
+    let odd_tail = (x_end % 2 == 1).then(|| {
+        let px = g.pad_left + x_end - 1;
+        (px % 2) * sub + px / 2
+    });
     for c in 0..g.channels {
         let plane = &input[c * g.in_plane()..(c + 1) * g.in_plane()];
         // 1. Padded, phase-split copy. Padded row py = y + pad_top goes to phase py % sh,
         //    row py / sh; likewise columns: input columns x ≡ r (mod sw) land in column
         //    phase (pad_left + r) % sw, from column (pad_left + r) / sw on.
-        for y in 0..g.in_h {
-            let py = y + g.pad_top;
-            if py >= rows_read {
-                break;
-            }
-            let row = &plane[y * g.in_w..y * g.in_w + x_end];
-            let base_y = (py % sh) * sw * sub + (py / sh) * wq;
+        for &(at, base_y) in &scratch.rows {
+            let row = &plane[at..at + x_end];
             if sw == 2 {
-                // Pairs of input columns split to the two column phases at once.
-                let (c0, c1) = (g.pad_left / 2, g.pad_left.div_ceil(2));
-                let pairs = x_end / 2;
-                let (lo, hi) = scratch.phases.split_at_mut(base_y + sub);
-                let (first, second) = (&mut lo[base_y..base_y + wq], &mut hi[..wq]);
-                let (a, b) = if g.pad_left.is_multiple_of(2) {
-                    (&mut first[c0..c0 + pairs], &mut second[c1..c1 + pairs])
+                let (lo, hi) = scratch.phases.split_at_mut(base_y + b_at.max(a_at));
+                let (a, b) = if a_at < b_at {
+                    (
+                        &mut lo[base_y + a_at..base_y + a_at + pairs],
+                        &mut hi[..pairs],
+                    )
                 } else {
-                    (&mut second[c0..c0 + pairs], &mut first[c1..c1 + pairs])
+                    (
+                        &mut hi[..pairs],
+                        &mut lo[base_y + b_at..base_y + b_at + pairs],
+                    )
                 };
                 for ((a, b), p) in a.iter_mut().zip(b.iter_mut()).zip(row.chunks_exact(2)) {
                     *a = p[0];
                     *b = p[1];
                 }
-                if x_end % 2 == 1 {
-                    let px = g.pad_left + x_end - 1;
-                    scratch.phases[base_y + (px % 2) * sub + px / 2] = row[x_end - 1];
+                if let Some(t) = odd_tail {
+                    scratch.phases[base_y + t] = row[x_end - 1];
                 }
                 continue;
             }
-            for r in 0..sw.min(x_end) {
-                let px = g.pad_left + r;
-                let first = base_y + (px % sw) * sub + px / sw;
-                let n = (x_end - r).div_ceil(sw);
-                let dst = &mut scratch.phases[first..first + n];
+            for &(r, first, n) in &scratch.cols {
+                let dst = &mut scratch.phases[base_y + first..base_y + first + n];
                 if sw == 1 {
                     copy_short(dst, row);
                 } else {
@@ -239,6 +293,21 @@ pub fn depthwise(
                 }
                 break;
             }
+            #[cfg(target_arch = "x86_64")]
+            if let (Some(simd), 3 | 5) = (v4, g.k_w) {
+                if g.k_w == 3 {
+                    wide16::row3(simd, wide, [src(0), src(1), src(2)], [w[0], w[1], w[2]]);
+                    continue; // the last kernel row of three taps is 3. above
+                }
+                let s = [src(0), src(1), src(2), src(3), src(4)];
+                wide16::row5(simd, wide, s, [w[0], w[1], w[2], w[3], w[4]]);
+                if ky + 1 == g.k_h {
+                    for (oy, dst) in out.chunks_exact_mut(g.out_w).enumerate() {
+                        copy_short(dst, &wide[oy * wq..oy * wq + g.out_w]);
+                    }
+                }
+                continue;
+            }
             match g.k_w {
                 3 => row3(wide, [src(0), src(1), src(2)], [w[0], w[1], w[2]]),
                 5 => row5(
@@ -264,6 +333,61 @@ pub fn depthwise(
         }
     }
     true
+}
+
+/// Block of the wide buffer's length: it holds whole blocks of 16 values for [`wide16`].
+const LANES: usize = 16;
+
+/// [`row3`] and [`row5`] on 16-value AVX-512 blocks, in safe code through pulp's `x86::V4`
+/// (detected at run time): each value the same multiplies and adds in the same order, so the
+/// same bits. The slices hold whole blocks (the wide buffer is padded to [`LANES`]).
+#[cfg(target_arch = "x86_64")]
+mod wide16 {
+    use super::LANES;
+    use pulp::x86::V4;
+    use pulp::{f32x16, Simd};
+
+    /// The 16 values of block `i` of `s`.
+    #[inline(always)]
+    fn block(s: &[f32], i: usize) -> f32x16 {
+        let (arrays, _) = pulp::as_arrays::<LANES, f32>(&s[i * LANES..(i + 1) * LANES]);
+        pulp::cast(arrays[0])
+    }
+
+    /// [`super::row3`]: `o + ((w₀·a + w₁·b) + w₂·c)` per value.
+    pub(super) fn row3(simd: V4, wide: &mut [f32], s: [&[f32]; 3], w: [f32; 3]) {
+        simd.vectorize(
+            #[inline(always)]
+            || {
+                let w = w.map(|w| simd.splat_f32s(w));
+                for (i, o) in wide.chunks_exact_mut(LANES).enumerate() {
+                    let t0 = simd.mul_f32s(w[0], block(s[0], i));
+                    let t = simd.add_f32s(t0, simd.mul_f32s(w[1], block(s[1], i)));
+                    let t = simd.add_f32s(t, simd.mul_f32s(w[2], block(s[2], i)));
+                    let v = simd.add_f32s(block(o, 0), t);
+                    o.copy_from_slice(&pulp::cast::<f32x16, [f32; LANES]>(v));
+                }
+            },
+        );
+    }
+
+    /// [`super::row5`]: `o + ((((w₀·a + w₁·b) + w₂·c) + w₃·d) + w₄·e)` per value.
+    pub(super) fn row5(simd: V4, wide: &mut [f32], s: [&[f32]; 5], w: [f32; 5]) {
+        simd.vectorize(
+            #[inline(always)]
+            || {
+                let w = w.map(|w| simd.splat_f32s(w));
+                for (i, o) in wide.chunks_exact_mut(LANES).enumerate() {
+                    let mut t = simd.mul_f32s(w[0], block(s[0], i));
+                    for k in 1..5 {
+                        t = simd.add_f32s(t, simd.mul_f32s(w[k], block(s[k], i)));
+                    }
+                    let v = simd.add_f32s(block(o, 0), t);
+                    o.copy_from_slice(&pulp::cast::<f32x16, [f32; LANES]>(v));
+                }
+            },
+        );
+    }
 }
 
 /// `wide[i] += w₀·s₀[i] + w₁·s₁[i] + w₂·s₂[i]` (one kernel row of three taps; the zipped
@@ -412,6 +536,57 @@ mod tests {
         // Every size, kernel and stride with at least the unpadded and "same" padding,
         // minus those a 1-wide input cannot take.
         assert!(cases > 150, "{cases} cases");
+    }
+
+    /// The AVX-512 rows (where the CPU has them) against the AVX2 / baseline rows: the same
+    /// bits on NanoTrack's shapes and ragged ones, one scratch reused across shapes (as the
+    /// networks do). On a CPU without AVX-512 both runs take the same rows.
+    #[test]
+    fn the_wide_rows_give_the_narrow_rows_bits() {
+        let (mut wide, mut narrow) = (Scratch::default(), Scratch::default());
+        for (case, &(c, n, k, s)) in [
+            (3usize, 96usize, 3usize, 2usize),
+            (5, 24, 3, 1),
+            (4, 24, 5, 2),
+            (7, 12, 5, 1),
+            (2, 11, 5, 1),
+            (3, 9, 3, 1),
+            (2, 3, 3, 1),
+            (3, 17, 5, 2),
+            (2, 1, 3, 1),
+        ]
+        .iter()
+        .enumerate()
+        {
+            let cases = case as u32;
+            let p = k / 2;
+            let Some(g) = Geometry::new(c, (n, n), (k, k), (s, s), (p, p), (p, p)) else {
+                panic!("valid geometry refused")
+            };
+            let input = values(c * n * n, cases);
+            let weights = values(c * k * k, cases + 1000);
+            let bias = values(c, cases + 2000);
+            let mut a = vec![f32::NAN; c * g.out_plane()];
+            let mut b = vec![f32::NAN; c * g.out_plane()];
+            assert!(depthwise_rows(
+                &g, &input, &weights, &bias, &mut a, &mut wide, true
+            ));
+            assert!(depthwise_rows(
+                &g,
+                &input,
+                &weights,
+                &bias,
+                &mut b,
+                &mut narrow,
+                false
+            ));
+            let same = a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits());
+            assert!(same, "{g:?}: the wide rows' bits differ");
+            assert!(
+                a.iter().all(|v| v.is_finite()),
+                "{g:?}: an output not written"
+            );
+        }
     }
 
     #[test]
