@@ -184,6 +184,8 @@ pub struct Patch {
     tmp: Vec<f32>,
     /// [`sample_bilinear`]'s per output column: the byte offsets of its two taps in a row.
     col_bytes: Vec<[usize; 2]>,
+    /// [`sample_bilinear`]'s per output column: its two taps' weights (0 for a missing second).
+    col_w: Vec<[f32; 2]>,
 }
 
 impl Patch {
@@ -197,6 +199,7 @@ impl Patch {
             rows: Vec::with_capacity(side),
             tmp: Vec::new(),
             col_bytes: Vec::new(),
+            col_w: Vec::new(),
         }
     }
 
@@ -549,6 +552,15 @@ fn sample_bilinear_into(frame: &Frame<'_>, center: Point2, region: f32, out: &mu
             .iter()
             .map(|t| [0, 1].map(|i| (pixel(t, i, cx.0, fw) - first) * bpp)),
     );
+    // A column with one tap gets a second of weight 0: `w₀·a + 0·b` is `w₀·a`'s bits, as
+    // every blended value is finite and at least +0 (bytes, non-negative weights), so the
+    // row loop has no branch per pixel.
+    out.col_w.clear();
+    out.col_w.extend(
+        out.cols
+            .iter()
+            .map(|t| [t.w[0], if t.len > 1 { t.w[1] } else { 0.0 }]),
+    );
     out.tmp.clear();
     out.tmp.resize(span.len(), 0.0);
     let data = frame.data();
@@ -575,13 +587,9 @@ fn sample_bilinear_into(frame: &Frame<'_>, center: Point2, region: f32, out: &mu
         for p in 0..planes {
             let o = offs[p];
             let dst = &mut out.data[p * n + r * side..p * n + (r + 1) * side];
-            for ((d, t), &[b0, b1]) in dst.iter_mut().zip(&out.cols).zip(&out.col_bytes) {
-                let a = out.tmp[b0 + o];
-                *d = if t.len > 1 {
-                    t.w[0] * a + t.w[1] * out.tmp[b1 + o]
-                } else {
-                    t.w[0] * a
-                };
+            let tmp = &out.tmp[o..];
+            for ((d, &[w0, w1]), &[b0, b1]) in dst.iter_mut().zip(&out.col_w).zip(&out.col_bytes) {
+                *d = w0 * tmp[b0] + w1 * tmp[b1];
             }
         }
     }
