@@ -463,7 +463,15 @@ fn sample_rect_into(
         .max()
         .unwrap_or(0)
         .min(w);
-    out.tmp.resize(w, 0.0);
+    // The horizontal pass reads every column's taps as `taps` of them (the widest
+    // footprint's count), those past a column's own with weight 0 on values of `tmp`'s slack
+    // or of other columns: `x + 0·y` is `x`'s bits, as every value and weight here is finite
+    // and at least +0 (pixel bytes, area and bilinear weights). A fixed count lets the
+    // compiler unroll the sum instead of looping per output pixel.
+    // `tmp` starts as zeros: a padded tap past the current row's range reads +0.
+    let taps = out.cols.iter().map(|t| t.len).max().unwrap_or(1);
+    out.tmp.clear();
+    out.tmp.resize(w + MAX_TAPS, 0.0);
     for p in 0..sampler.planes {
         let src = &sampler.inter[p * w * h..(p + 1) * w * h];
         for (r, rt) in out.rows.iter().enumerate() {
@@ -478,11 +486,26 @@ fn sample_rect_into(
                 }
             }
             let o = &mut out.data[(p * side + r) * side..(p * side + r + 1) * side];
-            for (o, ct) in o.iter_mut().zip(out.cols.iter()) {
-                let src = &out.tmp[ct.start..ct.start + ct.len];
-                *o = src.iter().zip(&ct.w).map(|(a, b)| a * b).sum();
+            match taps {
+                0 => columns::<0>(o, &out.cols, &out.tmp),
+                1 => columns::<1>(o, &out.cols, &out.tmp),
+                2 => columns::<2>(o, &out.cols, &out.tmp),
+                3 => columns::<3>(o, &out.cols, &out.tmp),
+                4 => columns::<4>(o, &out.cols, &out.tmp),
+                _ => columns::<MAX_TAPS>(o, &out.cols, &out.tmp),
             }
         }
+    }
+}
+
+/// `sample_rect`'s horizontal pass over one row: output `j` is column `j`'s taps applied to
+/// `tmp`, each column read as `L` taps (its own, then weight-0 ones; `tmp` has `MAX_TAPS`
+/// values of slack past the region).
+#[inline(always)] // into each clone of `sample_rect_into`
+fn columns<const L: usize>(out: &mut [f32], cols: &[Taps], tmp: &[f32]) {
+    for (o, ct) in out.iter_mut().zip(cols) {
+        let src = &tmp[ct.start..ct.start + L];
+        *o = src.iter().zip(&ct.w[..L]).map(|(a, b)| a * b).sum();
     }
 }
 
