@@ -92,23 +92,23 @@ impl Fft2 {
     pub fn forward_rows(&mut self, input: &[f32], r0: usize, r1: usize, spec: &mut [Complex32]) {
         let (h, w, wc) = (self.grid.h, self.grid.w, self.wc);
         debug_assert!(input.len() >= h * w && spec.len() >= wc * h);
-        for r in 0..h {
-            if r >= r0 && r < r1 {
-                self.row_real.copy_from_slice(&input[r * w..(r + 1) * w]);
-                // Lengths are fixed at planning time, so the transform cannot fail.
-                let _ = self.r2c.process_with_scratch(
-                    &mut self.row_real,
-                    &mut self.row_spec,
-                    &mut self.scratch_r,
-                );
-                for (kx, v) in self.row_spec.iter().enumerate() {
-                    spec[kx * h + r] = *v;
-                }
-            } else {
-                for kx in 0..wc {
-                    spec[kx * h + r] = Complex32::default();
-                }
+        let (r0, r1) = (r0.min(h), r1.min(h));
+        for r in r0..r1.max(r0) {
+            self.row_real.copy_from_slice(&input[r * w..(r + 1) * w]);
+            // Lengths are fixed at planning time, so the transform cannot fail.
+            let _ = self.r2c.process_with_scratch(
+                &mut self.row_real,
+                &mut self.row_spec,
+                &mut self.scratch_r,
+            );
+            for (kx, v) in self.row_spec.iter().enumerate() {
+                spec[kx * h + r] = *v;
             }
+        }
+        // The rows outside `r0..r1` are zero: runs of each frequency column.
+        for col in spec[..wc * h].chunks_exact_mut(h) {
+            col[..r0].fill(Complex32::default());
+            col[r1.max(r0)..].fill(Complex32::default());
         }
         self.col_fwd
             .process_with_scratch(&mut spec[..wc * h], &mut self.scratch_c);
