@@ -258,7 +258,9 @@ impl AdmmSolver {
         g_f.iter_mut().for_each(|v| *v = Complex32::default());
         self.s_xx.iter_mut().for_each(|v| *v = 0.0);
         for x in xf.chunks_exact(bins).take(d) {
-            add_norms(&mut self.s_xx, x);
+            for (s, v) in self.s_xx.iter_mut().zip(x) {
+                *s += f64::from(v.norm_sqr());
+            }
         }
         let iterations = iterations.min(self.mus.len());
         for it in 0..iterations {
@@ -278,7 +280,9 @@ impl AdmmSolver {
             // The final h- and l-updates cannot change the returned ĝ: skip them.
             if it + 1 < iterations {
                 self.h_step(fft, g_f, it, mu);
-                l_update(&mut self.l_f, g_f, &self.h_f, mu);
+                for ((l, g), h) in self.l_f.iter_mut().zip(g_f.iter()).zip(&self.h_f) {
+                    *l += (g - h) * mu;
+                }
             }
         }
     }
@@ -336,7 +340,9 @@ impl AdmmSolver {
         for ch in 0..self.channels {
             let g = &g_f[ch * bins..(ch + 1) * bins];
             let l = &self.l_f[ch * bins..(ch + 1) * bins];
-            scaled_sum(&mut self.tmp_f, g, mu, l);
+            for ((t, g), l) in self.tmp_f.iter_mut().zip(g).zip(l) {
+                *t = g * mu + l;
+            }
             // Only the box `r0..r1 × c0..c1` of `spat2` is ever written (the rest stays
             // zero from construction) and only its rows are transformed back.
             match &self.penalty {
@@ -390,30 +396,6 @@ impl AdmmSolver {
                 &mut self.h_f[ch * bins..(ch + 1) * bins],
             );
         }
-    }
-}
-
-/// `s[k] += |x[k]|²` in `f64` (the squared norm in `f32`, as `Complex32::norm_sqr`).
-#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
-fn add_norms(s: &mut [f64], x: &[Complex32]) {
-    for (s, v) in s.iter_mut().zip(x) {
-        *s += f64::from(v.re * v.re + v.im * v.im);
-    }
-}
-
-/// `l̂ += (ĝ − ĥ)·μ`, the ADMM multiplier's update.
-#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
-fn l_update(l_f: &mut [Complex32], g_f: &[Complex32], h_f: &[Complex32], mu: f32) {
-    for ((l, g), h) in l_f.iter_mut().zip(g_f).zip(h_f) {
-        *l += (g - h) * mu;
-    }
-}
-
-/// `t = ĝ·μ + l̂` per bin, the h-step's input.
-#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
-fn scaled_sum(t: &mut [Complex32], g: &[Complex32], mu: f32, l: &[Complex32]) {
-    for ((t, g), l) in t.iter_mut().zip(g).zip(l) {
-        *t = g * mu + l;
     }
 }
 
