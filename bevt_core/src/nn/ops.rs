@@ -139,6 +139,18 @@ pub(super) enum Binary {
     Div,
 }
 
+impl Binary {
+    #[inline(always)]
+    fn f(self, a: f32, b: f32) -> f32 {
+        match self {
+            Binary::Add => a + b,
+            Binary::Sub => a - b,
+            Binary::Mul => a * b,
+            Binary::Div => a / b,
+        }
+    }
+}
+
 /// A broadcast binary operation, its dimensions merged where both operands allow (see
 /// [`Broadcast::new`]).
 #[derive(Debug, Clone, PartialEq)]
@@ -224,69 +236,45 @@ impl Broadcast {
 
     /// `y = a ∘ b`.
     pub(super) fn apply(&self, op: Binary, a: &[f32], b: &[f32], y: &mut [f32]) {
-        broadcast_apply(self, op, a, b, y);
-    }
-}
-
-/// [`Broadcast::apply`]'s work (compiled for the baseline and with AVX2 + FMA, chosen at run
-/// time; the operation chosen once, outside the loops).
-#[multiversion::multiversion(targets("x86_64+avx2+fma"))]
-fn broadcast_apply(bc: &Broadcast, op: Binary, a: &[f32], b: &[f32], y: &mut [f32]) {
-    match op {
-        Binary::Add => broadcast_rows(bc, |a, b| a + b, a, b, y),
-        Binary::Sub => broadcast_rows(bc, |a, b| a - b, a, b, y),
-        Binary::Mul => broadcast_rows(bc, |a, b| a * b, a, b, y),
-        Binary::Div => broadcast_rows(bc, |a, b| a / b, a, b, y),
-    }
-}
-
-/// `y = f(a, b)` under `bc`'s broadcasting.
-#[inline(always)] // into each clone of `broadcast_apply`
-fn broadcast_rows(
-    bc: &Broadcast,
-    f: impl Fn(f32, f32) -> f32,
-    a: &[f32],
-    b: &[f32],
-    y: &mut [f32],
-) {
-    let last = bc.dims.len() - 1;
-    let inner = bc.dims[last];
-    let (ia, ib) = (bc.sa[last], bc.sb[last]);
-    let mut idx = vec![0usize; last];
-    for row in y.chunks_exact_mut(inner) {
-        let oa: usize = idx.iter().zip(&bc.sa).map(|(i, s)| i * s).sum();
-        let ob: usize = idx.iter().zip(&bc.sb).map(|(i, s)| i * s).sum();
-        match (ia, ib) {
-            (1, 1) => {
-                let it = row
-                    .iter_mut()
-                    .zip(&a[oa..oa + inner])
-                    .zip(&b[ob..ob + inner]);
-                it.for_each(|((y, &a), &b)| *y = f(a, b));
-            }
-            (1, 0) => {
-                let s = b[ob];
-                let it = row.iter_mut().zip(&a[oa..oa + inner]);
-                it.for_each(|(y, &a)| *y = f(a, s));
-            }
-            (0, 1) => {
-                let s = a[oa];
-                let it = row.iter_mut().zip(&b[ob..ob + inner]);
-                it.for_each(|(y, &b)| *y = f(s, b));
-            }
-            _ => {
-                for (j, y) in row.iter_mut().enumerate() {
-                    *y = f(a[oa + j * ia], b[ob + j * ib]);
+        let last = self.dims.len() - 1;
+        let inner = self.dims[last];
+        let (ia, ib) = (self.sa[last], self.sb[last]);
+        let mut idx = vec![0usize; last];
+        for row in y.chunks_exact_mut(inner) {
+            let oa: usize = idx.iter().zip(&self.sa).map(|(i, s)| i * s).sum();
+            let ob: usize = idx.iter().zip(&self.sb).map(|(i, s)| i * s).sum();
+            match (ia, ib) {
+                (1, 1) => {
+                    let it = row
+                        .iter_mut()
+                        .zip(&a[oa..oa + inner])
+                        .zip(&b[ob..ob + inner]);
+                    it.for_each(|((y, &a), &b)| *y = op.f(a, b));
+                }
+                (1, 0) => {
+                    let s = b[ob];
+                    let it = row.iter_mut().zip(&a[oa..oa + inner]);
+                    it.for_each(|(y, &a)| *y = op.f(a, s));
+                }
+                (0, 1) => {
+                    let s = a[oa];
+                    let it = row.iter_mut().zip(&b[ob..ob + inner]);
+                    it.for_each(|(y, &b)| *y = op.f(s, b));
+                }
+                _ => {
+                    for (j, y) in row.iter_mut().enumerate() {
+                        *y = op.f(a[oa + j * ia], b[ob + j * ib]);
+                    }
                 }
             }
-        }
-        // Next outer index, last dimension fastest.
-        for d in (0..last).rev() {
-            idx[d] += 1;
-            if idx[d] < bc.dims[d] {
-                break;
+            // Next outer index, last dimension fastest.
+            for d in (0..last).rev() {
+                idx[d] += 1;
+                if idx[d] < self.dims[d] {
+                    break;
+                }
+                idx[d] = 0;
             }
-            idx[d] = 0;
         }
     }
 }
@@ -399,10 +387,8 @@ pub(super) fn tile_cols(k: usize) -> usize {
 
 /// A 1 × 1 convolution of one batch item: `y[i][j] = act(Σ_p w[i][p] · x[p][j] + bias[i])`
 /// over planes of `plane` values, by [`rows_product`] on tiles of [`tile_cols`] columns
-/// copied into `tile` (at least `k · tile_cols(k)` values). Compiled for the baseline and with
-/// AVX2 + FMA (the tiles' copies; the product dispatches itself).
+/// copied into `tile` (at least `k · tile_cols(k)` values).
 #[allow(clippy::too_many_arguments)]
-#[multiversion::multiversion(targets("x86_64+avx2+fma"))]
 pub(super) fn pointwise(
     (m, k, plane): (usize, usize, usize),
     wp: &[f32],
