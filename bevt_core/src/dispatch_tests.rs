@@ -3,7 +3,8 @@
 //! on one without (or under `qemu-x86_64 -cpu Nehalem`) the baseline versions do, and
 //! both must give the same bits, the claim that lets the clones leave every box unchanged.
 //! `nn`'s matrix product also has an AVX-512 kernel (pulp's `x86::V4`) for whole blocks of
-//! 16 columns: on a CPU with AVX-512 its bits are the ones pinned below for the product.
+//! 16 columns, and the depthwise kernel AVX-512 rows of 3 and 5 taps: on a CPU with AVX-512
+//! their bits are the ones pinned below for the product and the depthwise convolutions.
 //! x86-64 only: other architectures compile the baseline versions alone.
 
 use crate::features::hog::Hog;
