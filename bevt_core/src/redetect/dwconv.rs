@@ -143,8 +143,9 @@ pub struct Scratch {
 /// (`channels` planes of `out_h × out_w`), zero padding. Returns `false` (and leaves
 /// `output` alone) when a slice has the wrong length.
 ///
-/// On x86-64 CPUs with AVX-512 the kernel rows of 3 and 5 taps run on 16-value blocks
-/// (safe code through pulp's `x86::V4`), each output the same operations in the same order: the same bits.
+/// On x86-64 CPUs with AVX-512 the kernel rows of 3 and 5 taps run on 16-value blocks (safe
+/// code through pulp's `x86::V4`), each output the same operations in the same order: the
+/// same bits.
 pub fn depthwise(
     g: &Geometry,
     input: &[f32],
