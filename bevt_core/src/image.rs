@@ -989,6 +989,62 @@ mod tests {
         }
     }
 
+    /// `sample_rect`'s output against the resampling written out per pixel (each column's own
+    /// taps only, summed as `Iterator::sum` does): the same bits, for footprints of 1 to 8
+    /// taps per axis (aspect ratios to [`MAX_SAMPLE_ASPECT`], up- and downscaling, regions over
+    /// the frame's edge), so the weight-0 taps the pass adds change nothing.
+    #[test]
+    fn rect_sampling_gives_the_per_pixel_resamplings_bits() {
+        let (w, h) = (61, 47);
+        let d: Vec<u8> = (0..w * h * 3)
+            .map(|i| ((i * 197 + i / 5) % 256) as u8)
+            .collect();
+        let f = Frame::packed(&d, w, h, PixelFormat::Rgb8).unwrap();
+        let mut widths = std::collections::BTreeSet::new();
+        for (cx, cy, rw, rh, side) in [
+            (30.0, 20.0, 40.0, 40.0, 16),
+            (30.5, 23.2, 57.0, 19.0, 12),
+            (3.0, 44.0, 21.0, 63.0, 9),
+            (40.0, 10.0, 10.0, 7.0, 24),
+            (58.0, 2.0, 90.0, 30.0, 10),
+            (20.0, 30.0, 33.0, 11.0, 5),
+        ] {
+            let c = Point2 { x: cx, y: cy };
+            let mut s = Sampler::default();
+            s.prepare(&f, c, f32::min(rw, rh), f32::max(rw, rh), side);
+            let mut out = Patch::new(side, 3);
+            s.sample_rect(c, rw, rh, &mut out);
+            widths.extend(out.cols.iter().map(|t| t.len));
+            let (iw, ih) = (s.inter_w, s.inter_h);
+            for p in 0..3 {
+                let src = &s.inter[p * iw * ih..(p + 1) * iw * ih];
+                for (r, rt) in out.rows.iter().enumerate() {
+                    let mut tmp = vec![0.0f32; iw];
+                    for t in 0..rt.len {
+                        for (a, b) in tmp.iter_mut().zip(&src[(rt.start + t) * iw..]) {
+                            *a += rt.w[t] * b;
+                        }
+                    }
+                    for (j, ct) in out.cols.iter().enumerate() {
+                        let taps = &tmp[ct.start..ct.start + ct.len];
+                        let want: f32 = taps.iter().zip(&ct.w).map(|(a, b)| a * b).sum();
+                        let got = out.data[(p * side + r) * side + j];
+                        assert_eq!(
+                            got.to_bits(),
+                            want.to_bits(),
+                            "{rw}x{rh} -> {side}: ({p}, {r}, {j})"
+                        );
+                    }
+                }
+            }
+        }
+        // Both kinds of pass were met: a specialised tap count (up to 4) and the general one.
+        assert!(
+            widths.iter().any(|&n| n <= 4) && widths.iter().any(|&n| n > 4),
+            "{widths:?}"
+        );
+    }
+
     #[test]
     fn prepared_region_is_exact_for_every_format_factor_and_overhang() {
         // Regions over each edge and beyond the frame (whole output rows and columns
