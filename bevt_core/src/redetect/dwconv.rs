@@ -136,6 +136,8 @@ pub struct Scratch {
     rows: Vec<(usize, usize)>,
     /// Per column phase `r`: `r`, its first destination from a row's base, its count.
     cols: Vec<(usize, usize, usize)>,
+    /// Per kernel tap: where it starts reading in the phases.
+    starts: Vec<usize>,
 }
 
 /// Depthwise convolution of `input` (`channels` planes of `in_h × in_w`, row-major) with
@@ -198,12 +200,12 @@ fn depthwise_rows(
     let x_end = g.in_w.min(cols_read.saturating_sub(g.pad_left));
     // Where each tap (ky, kx) starts reading: its phase sub-plane, shifted by ky / sh rows
     // and kx / sw columns.
-    let starts: Vec<usize> = (0..taps)
-        .map(|t| {
-            let (ky, kx) = (t / g.k_w, t % g.k_w);
-            ((ky % sh) * sw + kx % sw) * sub + (ky / sh) * wq + kx / sw
-        })
-        .collect();
+    scratch.starts.clear();
+    scratch.starts.extend((0..taps).map(|t| {
+        let (ky, kx) = (t / g.k_w, t % g.k_w);
+        ((ky % sh) * sw + kx % sw) * sub + (ky / sh) * wq + kx / sw
+    }));
+    let starts = &scratch.starts;
     // Where each input row's values go, worked out once for all channels (every channel's
     // plane has the same layout; the divisions by the strides cost more per row than the
     // copies of 12-value rows themselves): per input row its offset in the plane and its
@@ -294,33 +296,37 @@ fn depthwise_rows(
                 }
                 break;
             }
+            // The AVX-512 rows where the CPU has them, else the rows below; either way the
+            // last kernel row's valid columns are copied out after it (3.).
             #[cfg(target_arch = "x86_64")]
-            if let (Some(simd), 3 | 5) = (v4, g.k_w) {
-                if g.k_w == 3 {
+            let done = match (v4, g.k_w) {
+                (Some(simd), 3) => {
                     wide16::row3(simd, wide, [src(0), src(1), src(2)], [w[0], w[1], w[2]]);
-                    continue; // the last kernel row of three taps is 3. above
+                    true
                 }
-                let s = [src(0), src(1), src(2), src(3), src(4)];
-                wide16::row5(simd, wide, s, [w[0], w[1], w[2], w[3], w[4]]);
-                if ky + 1 == g.k_h {
-                    for (oy, dst) in out.chunks_exact_mut(g.out_w).enumerate() {
-                        copy_short(dst, &wide[oy * wq..oy * wq + g.out_w]);
-                    }
+                (Some(simd), 5) => {
+                    let s = [src(0), src(1), src(2), src(3), src(4)];
+                    wide16::row5(simd, wide, s, [w[0], w[1], w[2], w[3], w[4]]);
+                    true
                 }
-                continue;
-            }
-            match g.k_w {
-                3 => row3(wide, [src(0), src(1), src(2)], [w[0], w[1], w[2]]),
-                5 => row5(
-                    wide,
-                    [src(0), src(1), src(2), src(3), src(4)],
-                    [w[0], w[1], w[2], w[3], w[4]],
-                ),
-                _ => {
-                    for kx in 0..g.k_w {
-                        let wk = w[kx];
-                        for (o, &v) in wide.iter_mut().zip(src(kx)) {
-                            *o += wk * v;
+                _ => false,
+            };
+            #[cfg(not(target_arch = "x86_64"))]
+            let done = false;
+            if !done {
+                match g.k_w {
+                    3 => row3(wide, [src(0), src(1), src(2)], [w[0], w[1], w[2]]),
+                    5 => row5(
+                        wide,
+                        [src(0), src(1), src(2), src(3), src(4)],
+                        [w[0], w[1], w[2], w[3], w[4]],
+                    ),
+                    _ => {
+                        for kx in 0..g.k_w {
+                            let wk = w[kx];
+                            for (o, &v) in wide.iter_mut().zip(src(kx)) {
+                                *o += wk * v;
+                            }
                         }
                     }
                 }
