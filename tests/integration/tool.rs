@@ -499,3 +499,151 @@ fn the_speed_scripts_refuse_bad_arguments_before_any_work() {
     }
     let _ = std::fs::remove_dir_all(&tmp);
 }
+
+/// The selection protocol's scripts (docs/results.md#selection-protocol): `protocol-runs.sh`
+/// refuses a bad label or job count before it builds or writes anything; `rule3.py` reads a
+/// challenger against the rounding band (the lowest of the incumbent and its rounding variants
+/// per condition, and of their means of the ten): inside it passes, a mean below it or one
+/// condition more than 0.02 under it is refused, and missing runs are an error; and the
+/// rounding variants' patches still apply to this tree (a stale patch would make the band a
+/// measurement of nothing).
+#[test]
+fn the_protocol_scripts_read_the_rounding_band_and_refuse_bad_input() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+    let tmp = temp_dir("protocol_scripts");
+    for (args, says) in [
+        (vec![""], "LABEL must be"),
+        (vec!["a/b"], "LABEL must be"),
+        (vec!["../up"], "LABEL must be"),
+    ] {
+        let out = std::process::Command::new("bash")
+            .arg(root.join("scripts/protocol-runs.sh"))
+            .args(&args)
+            .env("BEVT", tmp.join("no_such_bevt"))
+            .output()
+            .expect("bash runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+    let out = std::process::Command::new("bash")
+        .arg(root.join("scripts/protocol-runs.sh"))
+        .arg("ok_label")
+        .env("JOBS", "0")
+        .env("BEVT", tmp.join("no_such_bevt"))
+        .output()
+        .expect("bash runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("JOBS must be a positive integer"), "{err}");
+
+    // Runs as protocol-runs.sh leaves them: LABEL/CONDITION/summary.json.
+    let conditions = [
+        "none",
+        "shake16s1",
+        "shake16s2",
+        "shake8s2",
+        "tiny_shake",
+        "tiny",
+        "zoom",
+        "aspect",
+        "light",
+        "lookalike",
+        "blur",
+    ];
+    let write = |label: &str, auc: &dyn Fn(&str) -> f64| {
+        for c in conditions {
+            let dir = tmp.join("runs").join(label).join(c);
+            std::fs::create_dir_all(&dir).unwrap();
+            let a = auc(c);
+            let s = serde_json::json!({
+                "overall": {"auc": a, "precision_20": 0.97},
+                "sequences": [{"name": "s1", "status": "ok", "auc": a}],
+            });
+            std::fs::write(dir.join("summary.json"), s.to_string()).unwrap();
+        }
+    };
+    write("inc", &|_| 0.60);
+    // The null variant: zoom 0.10 lower, blur 0.01 higher (mean of the ten 0.591).
+    write("null", &|c| match c {
+        "zoom" => 0.50,
+        "blur" => 0.61,
+        _ => 0.60,
+    });
+    // Inside the band: zoom at the band's floor minus 0.015, the mean above the floor's.
+    write("inside", &|c| match c {
+        "zoom" => 0.485,
+        "light" => 0.64,
+        _ => 0.60,
+    });
+    // One condition beyond it: aspect 0.03 under its floor (0.60).
+    write("beyond", &|c| if c == "aspect" { 0.57 } else { 0.60 });
+    // Every condition within 0.02 of its floor but the mean of the ten below the band's.
+    write("mean_low", &|c| if c == "none" { 0.60 } else { 0.585 });
+    let rule3 = |challenger: &str| {
+        std::process::Command::new("python3")
+            .arg(root.join("scripts/rule3.py"))
+            .args(["--root", tmp.join("runs").to_str().unwrap()])
+            .args(["--incumbent", "inc", "--null", "null", challenger])
+            .output()
+            .expect("python3 runs")
+    };
+    let out = rule3("inside");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{text}");
+    assert!(
+        text.contains("| zoom | 0.600 | 0.500 | 0.500–0.600 | 0.485 |"),
+        "{text}"
+    );
+    assert!(
+        text.contains("inside: rule 3 above the rounding floor passes"),
+        "{text}"
+    );
+    // The plain rule of before would have refused it (zoom −0.115 against the incumbent).
+    assert!(text.contains("refused: zoom -0.115"), "{text}");
+    let out = rule3("beyond");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert!(
+        text.contains("REFUSED: aspect 0.570 < floor 0.600"),
+        "{text}"
+    );
+    let out = rule3("mean_low");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert!(
+        text.contains("REFUSED: mean of ten 0.585 < 0.591"),
+        "{text}"
+    );
+    let out = rule3("never_run");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_ne!(out.status.code(), Some(0), "{err}");
+    assert!(
+        err.contains("run scripts/protocol-runs.sh never_run first"),
+        "{err}"
+    );
+
+    // The rounding variants apply to this tree (CI's clean clone is a git checkout).
+    let patches: Vec<_> = std::fs::read_dir(root.join("scripts/rounding-floor"))
+        .expect("scripts/rounding-floor")
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "patch"))
+        .collect();
+    assert_eq!(patches.len(), 3, "{patches:?}");
+    for p in patches {
+        let out = std::process::Command::new("git")
+            .current_dir(root)
+            .args(["apply", "--check"])
+            .arg(&p)
+            .output()
+            .expect("git runs");
+        assert!(
+            out.status.success(),
+            "{}: {}",
+            p.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let _ = std::fs::remove_dir_all(&tmp);
+}
