@@ -484,12 +484,13 @@ fn rows_product_narrow(
         }
         return;
     }
-    // A multiply and an add, not `mul_add`: every clone (AVX2, the x86-64 baseline, aarch64)
-    // then gives the same bits (dispatch_tests pins them), and no clone can fall back to
-    // glibc's software `fmaf` (x86-64 CPUs without FMA). With 8 independent sums per row
-    // the add's latency is what bounds the loop, as the FMA's did: equal speed on the AMD
-    // host (verifier_passes search 400: 2.31-2.51 s user against 2.34-2.41 with FMA).
-    let madd = |w: f32, x: f32, a: f32| a + w * x;
+    // A fused multiply-add (one rounding) where the CPU has one: the AVX2 + FMA clone and
+    // every aarch64 CPU; the x86-64 baseline clone (CPUs without FMA) multiplies and adds,
+    // since glibc's software `fmaf` would be tens of times slower. The two give other last
+    // bits (dispatch_tests pins both).
+    let fused = cfg!(target_arch = "aarch64")
+        || multiversion::target::target_cfg_f!(target_feature = "fma");
+    let madd = |w: f32, x: f32, a: f32| if fused { w.mul_add(x, a) } else { a + w * x };
     let full = n - n % BLOCK_N;
     for (b, wb) in wp.chunks_exact(k * BLOCK_M).enumerate() {
         let i0 = b * BLOCK_M;
@@ -575,9 +576,9 @@ mod wide {
                         let mut acc = [simd.splat_f32s(0.0); BLOCK_M];
                         for (p, w) in wb.chunks_exact(BLOCK_M).enumerate() {
                             let xv = load(p * xs + j);
-                            // a + w · x: a multiply, then an add, as in every other clone.
+                            // a + w · x fused, as in the AVX2 + FMA clone.
                             for (a, &w) in acc.iter_mut().zip(w) {
-                                *a = simd.add_f32s(*a, simd.mul_f32s(simd.splat_f32s(w), xv));
+                                *a = simd.mul_add_e_f32s(simd.splat_f32s(w), xv, *a);
                             }
                         }
                         for (i, a) in acc.iter().enumerate().take(rows) {
