@@ -18,7 +18,9 @@ cd "$(dirname "$0")/.."
 
 label=${1:-}
 case "$label" in
-  '' | *[!A-Za-z0-9._-]*) echo "protocol-runs: LABEL must be letters, digits, '.', '_' or '-', got '$label'" >&2; exit 2 ;;
+  '' | . | .. | -* | *[!A-Za-z0-9._-]*)
+    echo "protocol-runs: LABEL must be letters, digits, '.', '_' or '-' (not '.', '..' or a leading '-'), got '$label'" >&2
+    exit 2 ;;
 esac
 shift
 jobs=${JOBS:-2}

@@ -515,6 +515,9 @@ fn the_protocol_scripts_read_the_rounding_band_and_refuse_bad_input() {
         (vec![""], "LABEL must be"),
         (vec!["a/b"], "LABEL must be"),
         (vec!["../up"], "LABEL must be"),
+        (vec![".."], "LABEL must be"),
+        (vec!["."], "LABEL must be"),
+        (vec!["-x"], "LABEL must be"),
     ] {
         let out = std::process::Command::new("bash")
             .arg(root.join("scripts/protocol-runs.sh"))
