@@ -4,7 +4,8 @@
 # run, JOBS runs at a time (accuracy does not depend on load; the fps in these runs mean
 # nothing). Each condition's boxes and summary.json go to target/protocol/LABEL/CONDITION/;
 # an existing condition folder with a summary of all sequences is kept, not run again, so an
-# interrupted call resumes. Read the results with scripts/rule3.py.
+# interrupted call resumes; a LABEL that holds runs of another binary, other arguments or
+# another dataset is refused (exit 2) rather than mixed. Read the results with scripts/rule3.py.
 #
 # Usage: scripts/protocol-runs.sh LABEL [BEVT_EVAL_ARGS...]
 #   LABEL           folder name under target/protocol (letters, digits, '.', '_', '-')
@@ -38,11 +39,21 @@ fi
 [ -x "$bevt" ] || { echo "protocol-runs: $bevt is not an executable" >&2; exit 2; }
 # A private copy: a build during the runs must not swap the binary under them.
 out=target/protocol/$label
+# What the runs under LABEL are of: a resumed call must be of the same binary, arguments and
+# dataset, or its conditions would mix two trackers.
+signature=$(printf '%s\n' "binary sha256: $(sha256sum "$bevt" | cut -d' ' -f1)" "args: $*" \
+  "dataset: $(cd "$dataset" && pwd)")
+if [ -f "$out/signature" ] && [ "$(cat "$out/signature")" != "$signature" ]; then
+  echo "protocol-runs: $out holds runs of another binary, arguments or dataset:" >&2
+  sed 's/^/  /' "$out/signature" >&2
+  echo "  choose another LABEL or remove $out" >&2
+  exit 2
+fi
 mkdir -p "$out"
+printf '%s\n' "$signature" > "$out/signature"
 cp "$bevt" "$out/bevt"
-printf '%s\n' "binary: $bevt ($(sha256sum "$bevt" | cut -c1-16))" "args: $*" \
-  "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)" \
-  "start: $(date -u '+%Y-%m-%d %H:%M:%S UTC')" > "$out/run.txt"
+printf '%s\n' "binary: $bevt" "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)" \
+  "start: $(date -u '+%Y-%m-%d %H:%M:%S UTC')" >> "$out/run.txt"
 
 # name=spec; "none" runs unperturbed. The ten of rule 3, in the order of docs/results.md.
 conditions=(
@@ -79,10 +90,10 @@ run_one() {
   rm -rf "$dir"
   [ -z "$spec" ] || perturb=(--perturb "$spec")
   if "$out/bevt" eval --dataset "$dataset" --out "$dir" --threads 1 "${perturb[@]}" "$@" \
-    > "$dir.log" 2>&1; then
+    > "$dir.log" 2>&1 && complete "$dir"; then
     echo "protocol-runs: $label/$name finished $(date -u '+%H:%M:%S')"
   else
-    echo "protocol-runs: $label/$name FAILED (see $dir.log)" >&2
+    echo "protocol-runs: $label/$name FAILED: no complete summary (see $dir.log)" >&2
     return 1
   fi
 }

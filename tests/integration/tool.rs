@@ -534,6 +534,55 @@ fn the_protocol_scripts_read_the_rounding_band_and_refuse_bad_input() {
         assert!(err.contains(says), "{label:?}: {err}");
     }
 
+    // A label's runs are of one binary, one argument list and one dataset: a run that leaves
+    // no complete summary fails, and a second call with another binary or other arguments is
+    // refused instead of mixing its conditions with the first's.
+    let data = tmp.join("data");
+    std::fs::create_dir_all(&data).unwrap();
+    std::fs::write(
+        data.join("sequences.json"),
+        r#"{"sequences": [{"name": "s1"}]}"#,
+    )
+    .unwrap();
+    let fake = |name: &str, body: &str| {
+        let p = tmp.join(name);
+        std::fs::write(&p, format!("#!/bin/sh\n# {body}\nexit 0\n")).unwrap();
+        let mut perm = std::fs::metadata(&p).unwrap().permissions();
+        std::os::unix::fs::PermissionsExt::set_mode(&mut perm, 0o755);
+        std::fs::set_permissions(&p, perm).unwrap();
+        p
+    };
+    let (bin_a, bin_b) = (fake("bevt_a", "a"), fake("bevt_b", "b"));
+    let label = format!("test_signature_{}", std::process::id());
+    let held = root.join("target/protocol").join(&label);
+    let call = |bin: &Path, extra: &[&str]| {
+        std::process::Command::new("bash")
+            .arg(root.join("scripts/protocol-runs.sh"))
+            .arg(&label)
+            .args(extra)
+            .env("BEVT", bin)
+            .env("DATASET", &data)
+            .output()
+            .expect("bash runs")
+    };
+    let out = call(&bin_a, &[]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("FAILED: no complete summary"), "{err}");
+    for (bin, extra) in [
+        (&bin_b, &[][..]),
+        (&bin_a, &["--set", "admm.iterations=2"][..]),
+    ] {
+        let out = call(bin, extra);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(
+            err.contains("holds runs of another binary, arguments or dataset"),
+            "{extra:?}: {err}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&held);
+
     // Runs as protocol-runs.sh leaves them: LABEL/CONDITION/summary.json.
     let conditions = [
         "none",
