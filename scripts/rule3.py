@@ -128,7 +128,6 @@ def main():
         else:
             where = "within the band (equal to the incumbent: rule 2 takes the cheaper)"
         print(f"{lab}: dev set unperturbed {p20:.3f} / {auc:.3f}: {where}")
-    # Per-sequence AUCs of the conditions where any build left the band, for reading.
     return 1 if refused_any else 0
 
 
