@@ -6,7 +6,8 @@
 //! CPU has FMA (every x86-64 CPU with AVX2, every aarch64 CPU), so on x86-64 CPUs without
 //! it the networks' last bits differ (docs/benchmarks.md, "fused multiply-adds").
 //! `nn`'s matrix product also has an AVX-512 kernel (pulp's `x86::V4`) for whole blocks of
-//! 16 columns, and the depthwise kernel AVX-512 rows of 3 and 5 taps: on a CPU with AVX-512
+//! 16 columns, and the depthwise kernel AVX-512 blocks (3 × 3 and 5 × 5 kernels summed in
+//! registers, other kernels' rows of 3 and 5 taps): on a CPU with AVX-512
 //! their bits are the ones pinned below for the product and the depthwise convolutions.
 //! x86-64 only: other architectures compile the baseline versions alone.
 

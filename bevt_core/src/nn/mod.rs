@@ -682,7 +682,7 @@ impl Builder {
                     let mut c = vec![0.0; m * nn];
                     let scaled: Vec<f32> = t.to_f32().iter().map(|v| beta * v).collect();
                     debug_assert_eq!(shape, [m, nn]);
-                    bcast.apply(Binary::Add, &zeros, &scaled, &mut c);
+                    bcast.apply(Binary::Add, &zeros, &scaled, None, &mut c);
                     Some(c)
                 }
                 Some(Val::Buf { .. }) => {
@@ -980,10 +980,7 @@ impl Runner {
                 // Take the output out so that both operands can be borrowed (they may be
                 // the same buffer).
                 let mut out = std::mem::take(&mut self.bufs[*y]);
-                bc.apply(*op, &self.bufs[*a], &self.bufs[*b], &mut out);
-                if let Some(f) = act {
-                    ops::unary_in_place(*f, &mut out);
-                }
+                bc.apply(*op, &self.bufs[*a], &self.bufs[*b], *act, &mut out);
                 self.bufs[*y] = out;
             }
             Step::MatMul {

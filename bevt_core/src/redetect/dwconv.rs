@@ -23,9 +23,11 @@
 //!
 //! Where each input row goes (its phase and offset: divisions by the strides) is worked out
 //! once per call, not per channel: on 12 × 12 maps those divisions cost more than the
-//! copies. On x86-64 CPUs with AVX-512 the kernel rows of 3 and 5 taps run on 16-value
-//! blocks (pulp's `x86::V4`, safe code), the wide buffer padded to whole blocks; each value
-//! is the same multiplies and adds in the same order as in the other rows, so the same bits.
+//! copies. On x86-64 CPUs with AVX-512 the work runs on 16-value blocks (pulp's `x86::V4`,
+//! safe code), the wide buffer padded to whole blocks: for the networks' square kernels (3 × 3
+//! and 5 × 5) each block summed over all kernel rows in registers and stored once, for other
+//! kernels row by row; each value is the same multiplies and adds in the same order as in
+//! the other rows, so the same bits.
 //!
 //! Tested against a naive reference here; the networks' outputs against ONNX Runtime's
 //! reference values (`tests/integration/verifier.rs`).
@@ -145,9 +147,8 @@ pub struct Scratch {
 /// (`channels` planes of `out_h × out_w`), zero padding. Returns `false` (and leaves
 /// `output` alone) when a slice has the wrong length.
 ///
-/// On x86-64 CPUs with AVX-512 the kernel rows of 3 and 5 taps run on 16-value blocks (safe
-/// code through pulp's `x86::V4`), each output the same operations in the same order: the
-/// same bits.
+/// On x86-64 CPUs with AVX-512 the work runs on 16-value blocks (safe code through pulp's
+/// `x86::V4`), each output the same operations in the same order: the same bits.
 pub fn depthwise(
     g: &Geometry,
     input: &[f32],
@@ -275,12 +276,29 @@ fn depthwise_rows(
                 }
             }
         }
-        // 2. Kernel row by kernel row over the wide output, which starts at the bias; the
-        //    last kernel row, 3., writes the valid columns straight to the output.
         let wide = &mut scratch.wide[..span];
-        wide.fill(bias[c]);
         let kernel = &weights[c * taps..(c + 1) * taps];
         let out = &mut output[c * g.out_plane()..(c + 1) * g.out_plane()];
+        // 2. and 3. on AVX-512, for the networks' square kernels: each block of the wide
+        //    output summed over every kernel row in registers, then the valid columns.
+        #[cfg(target_arch = "x86_64")]
+        if let Some(simd) = v4 {
+            let phases = &scratch.phases[..];
+            let done = match (g.k_h, g.k_w) {
+                (3, 3) => wide16::channel::<3, 9>(simd, wide, phases, starts, kernel, bias[c]),
+                (5, 5) => wide16::channel::<5, 25>(simd, wide, phases, starts, kernel, bias[c]),
+                _ => false,
+            };
+            if done {
+                for (oy, dst) in out.chunks_exact_mut(g.out_w).enumerate() {
+                    copy_short(dst, &wide[oy * wq..oy * wq + g.out_w]);
+                }
+                continue;
+            }
+        }
+        // 2. Kernel row by kernel row over the wide output, which starts at the bias; the
+        //    last kernel row, 3., writes the valid columns straight to the output.
+        wide.fill(bias[c]);
         for ky in 0..g.k_h {
             let w = &kernel[ky * g.k_w..(ky + 1) * g.k_w];
             let row_starts = &starts[ky * g.k_w..(ky + 1) * g.k_w];
@@ -359,6 +377,50 @@ mod wide16 {
     fn block(s: &[f32], i: usize) -> f32x16 {
         let (arrays, _) = pulp::as_arrays::<LANES, f32>(&s[i * LANES..(i + 1) * LANES]);
         pulp::cast(arrays[0])
+    }
+
+    /// One channel's whole wide output for a `K × K` kernel (`T` = `K²` taps starting at
+    /// `starts` in `phases`): per block, from the bias, `o + (((w₀·a + w₁·b) + …) + w_{K−1}·z)`
+    /// kernel row after kernel row, as [`row3`] and [`row5`] compute it across passes over
+    /// the buffer (the same bits), but summed in registers: one store per block instead of
+    /// a load and a store per kernel row, and no pass filling the bias. `false` (nothing
+    /// done) when the sizes do not match.
+    pub(super) fn channel<const K: usize, const T: usize>(
+        simd: V4,
+        wide: &mut [f32],
+        phases: &[f32],
+        starts: &[usize],
+        kernel: &[f32],
+        bias: f32,
+    ) -> bool {
+        let span = wide.len();
+        if K * K != T
+            || kernel.len() != T
+            || starts.len() != T
+            || starts.iter().any(|&s| s + span > phases.len())
+        {
+            return false;
+        }
+        let src: [&[f32]; T] = std::array::from_fn(|t| &phases[starts[t]..starts[t] + span]);
+        simd.vectorize(
+            #[inline(always)]
+            || {
+                let w: [f32x16; T] = std::array::from_fn(|t| simd.splat_f32s(kernel[t]));
+                for (i, o) in wide.chunks_exact_mut(LANES).enumerate() {
+                    let mut acc = simd.splat_f32s(bias);
+                    for ky in 0..K {
+                        let r = ky * K;
+                        let mut t = simd.mul_f32s(w[r], block(src[r], i));
+                        for kx in 1..K {
+                            t = simd.add_f32s(t, simd.mul_f32s(w[r + kx], block(src[r + kx], i)));
+                        }
+                        acc = simd.add_f32s(acc, t);
+                    }
+                    o.copy_from_slice(&pulp::cast::<f32x16, [f32; LANES]>(acc));
+                }
+            },
+        );
+        true
     }
 
     /// [`super::row3`]: `o + ((w₀·a + w₁·b) + w₂·c)` per value.
@@ -551,27 +613,31 @@ mod tests {
     #[test]
     fn the_wide_rows_give_the_narrow_rows_bits() {
         let (mut wide, mut narrow) = (Scratch::default(), Scratch::default());
-        for (case, &(c, n, k, s)) in [
-            (3usize, 96usize, 3usize, 2usize),
-            (5, 24, 3, 1),
-            (4, 24, 5, 2),
-            (7, 12, 5, 1),
-            (2, 11, 5, 1),
-            (3, 9, 3, 1),
-            (2, 3, 3, 1),
-            (3, 17, 5, 2),
-            (2, 1, 3, 1),
+        // (channels, side, kernel height, kernel width, stride): the square kernels take the
+        // in-register blocks, the others the AVX-512 rows of 3 and 5 taps.
+        for (case, &(c, n, kh, k, s)) in [
+            (3usize, 96usize, 3usize, 3usize, 2usize),
+            (5, 24, 3, 3, 1),
+            (4, 24, 5, 5, 2),
+            (7, 12, 5, 5, 1),
+            (2, 11, 5, 5, 1),
+            (3, 9, 3, 3, 1),
+            (2, 3, 3, 3, 1),
+            (3, 17, 5, 5, 2),
+            (2, 1, 3, 3, 1),
+            (3, 16, 1, 5, 1),
+            (2, 13, 5, 3, 2),
         ]
         .iter()
         .enumerate()
         {
             let cases = case as u32;
-            let p = k / 2;
-            let Some(g) = Geometry::new(c, (n, n), (k, k), (s, s), (p, p), (p, p)) else {
+            let (ph, p) = (kh / 2, k / 2);
+            let Some(g) = Geometry::new(c, (n, n), (kh, k), (s, s), (ph, ph), (p, p)) else {
                 panic!("valid geometry refused")
             };
             let input = values(c * n * n, cases);
-            let weights = values(c * k * k, cases + 1000);
+            let weights = values(c * kh * k, cases + 1000);
             let bias = values(c, cases + 2000);
             let mut a = vec![f32::NAN; c * g.out_plane()];
             let mut b = vec![f32::NAN; c * g.out_plane()];
