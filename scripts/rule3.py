@@ -15,6 +15,9 @@ its null variants), and for each challenger the verdict:
 - and where its unperturbed P@20 / AUC lie against the band: inside it, a challenger made for
   cost is equal to the incumbent (rule 2's cost trade).
 
+A run that holds fewer sequences than another (still running, or cut short: summary.json is
+rewritten as each sequence finishes) is an error, not a mean over fewer sequences.
+
 Usage: scripts/rule3.py --incumbent LABEL [--null LABEL ...] [--per 0.02] [--pooled 0.0]
                         [--root target/protocol] CHALLENGER_LABEL ...
 Standard library only.
@@ -72,6 +75,19 @@ def main():
     band_labels = [a.incumbent] + a.null
     builds = {lab: load(a.root, lab) for lab in band_labels + a.challengers}
     inc = builds[a.incumbent]
+    # summary.json is rewritten as each sequence finishes: a run still going (or cut short)
+    # holds fewer sequences than the others, and its mean is of another set. Every run must
+    # hold every sequence any run holds.
+    everyone = set().union(*(r[2] for runs in builds.values() for r in runs.values()))
+    for lab, runs in builds.items():
+        for cond, r in runs.items():
+            missing = sorted(everyone - set(r[2]))
+            if missing:
+                sys.exit(
+                    f"rule3: {os.path.join(a.root, lab, cond, 'summary.json')}: "
+                    f"{len(r[2])} of {len(everyone)} sequences, missing {missing} "
+                    "(still running or cut short)"
+                )
 
     def mean10(runs):
         return sum(runs[c][0] for c in PERTURBED) / len(PERTURBED)

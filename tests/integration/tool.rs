@@ -504,9 +504,9 @@ fn the_speed_scripts_refuse_bad_arguments_before_any_work() {
 /// refuses a bad label or job count before it builds or writes anything; `rule3.py` reads a
 /// challenger against the rounding band (the lowest of the incumbent and its rounding variants
 /// per condition, and of their means of the ten): inside it passes, a mean below it or one
-/// condition more than 0.02 under it is refused, and missing runs are an error; and the
-/// rounding variants' patches still apply to this tree (a stale patch would make the band a
-/// measurement of nothing).
+/// condition more than 0.02 under it is refused, and missing or unfinished runs are an error;
+/// and the rounding variants' patches still apply to this tree (a stale patch would make the
+/// band a measurement of nothing).
 #[test]
 fn the_protocol_scripts_read_the_rounding_band_and_refuse_bad_input() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
@@ -626,6 +626,13 @@ fn the_protocol_scripts_read_the_rounding_band_and_refuse_bad_input() {
     write("beyond", &|c| if c == "aspect" { 0.57 } else { 0.60 });
     // Every condition within 0.02 of its floor but the mean of the ten below the band's.
     write("mean_low", &|c| if c == "none" { 0.60 } else { 0.585 });
+    // A run still going: its blur summary holds no sequence yet (a low mean of none).
+    write("partial", &|_| 0.60);
+    let blur = serde_json::json!({
+        "overall": {"auc": 0.2, "precision_20": 0.9},
+        "sequences": [],
+    });
+    std::fs::write(tmp.join("runs/partial/blur/summary.json"), blur.to_string()).unwrap();
     let rule3 = |challenger: &str| {
         std::process::Command::new("python3")
             .arg(root.join("scripts/rule3.py"))
@@ -662,6 +669,11 @@ fn the_protocol_scripts_read_the_rounding_band_and_refuse_bad_input() {
             "never_run",
             Some(1),
             &["run scripts/protocol-runs.sh never_run first"][..],
+        ),
+        (
+            "partial",
+            Some(1),
+            &["0 of 1 sequences, missing ['s1'] (still running or cut short)"][..],
         ),
     ] {
         let out = rule3(challenger);
