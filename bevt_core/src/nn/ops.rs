@@ -477,9 +477,9 @@ pub(crate) fn pack_rows(w: &[f32], m: usize, k: usize) -> Vec<f32> {
 /// in registers, each of `x`'s values loaded once for 8 broadcast weights; `x`'s rows are
 /// read where they lie (`pointwise` copies a 1 × 1 convolution's into tiles first).
 ///
-/// On x86-64 CPUs with AVX-512 the columns in whole blocks of 16 go to [`wide`]'s kernel
-/// (8 × 32 outputs in registers, then 8 × 16 for an odd block; the same operations per
-/// output in the same order), the rest to this one.
+/// On x86-64 CPUs with AVX-512 every column goes to [`wide`]'s kernel (8 × 32 outputs in
+/// registers, then 8 × 16 for an odd block, then the last columns in masked registers; the
+/// same operations per output in the same order); elsewhere to this one.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn rows_product(
     (m, k, n): (usize, usize, usize),
@@ -591,8 +591,8 @@ mod wide {
     /// Output columns per step.
     const N: usize = 16;
 
-    /// Columns `0..n − n mod 16` of [`super::rows_product`], returning how many were done
-    /// (0 on a CPU without AVX-512, or when `k` is 0).
+    /// [`super::rows_product`], returning how many columns were done: all `n` (0 on a CPU
+    /// without AVX-512, or when `k` is 0).
     #[allow(clippy::too_many_arguments)]
     pub(super) fn rows_product(
         (m, k, n): (usize, usize, usize),
@@ -605,7 +605,7 @@ mod wide {
         ys: usize,
     ) -> usize {
         let full = n - n % N;
-        let Some(simd) = V4::try_new().filter(|_| k > 0 && full > 0) else {
+        let Some(simd) = V4::try_new().filter(|_| k > 0 && n > 0) else {
             return 0;
         };
         simd.vectorize(
@@ -656,15 +656,31 @@ mod wide {
                             store(y, (i0 + i) * ys + j, *a, bias[i0 + i]);
                         }
                     }
+                    // The last `n − full` columns (fewer than 16): masked loads that fill the
+                    // other lanes with zeros, masked stores; each output as above.
+                    if full < n {
+                        let mut acc = [simd.splat_f32s(0.0); BLOCK_M];
+                        for (p, w) in wb.chunks_exact(BLOCK_M).enumerate() {
+                            let xv = simd.partial_load_f32s(&x[p * xs + full..p * xs + n]);
+                            for (a, &w) in acc.iter_mut().zip(w) {
+                                *a = simd.mul_add_e_f32s(simd.splat_f32s(w), xv, *a);
+                            }
+                        }
+                        for (i, a) in acc.iter().enumerate().take(rows) {
+                            let v = simd.add_f32s(*a, simd.splat_f32s(bias[i0 + i]));
+                            let at = (i0 + i) * ys;
+                            simd.partial_store_f32s(&mut y[at + full..at + n], v);
+                        }
+                    }
                     if let Some(f) = act {
                         for i in i0..i0 + rows {
-                            apply_in_place(f, &mut y[i * ys..i * ys + full]);
+                            apply_in_place(f, &mut y[i * ys..i * ys + n]);
                         }
                     }
                 }
             },
         );
-        full
+        n
     }
 }
 
@@ -724,7 +740,7 @@ mod tests {
     use super::*;
 
     /// The AVX-512 kernel's columns equal the 8-column kernel's bit for bit, over shapes with
-    /// partial row blocks, a rest of columns and strided rows. On a CPU without AVX-512 the
+    /// partial row blocks, a rest of columns (its masked tail) and strided rows. On a CPU without AVX-512 the
     /// wide kernel does no column (checked too), and the comparison covers nothing more than
     /// the narrow kernel against itself: `dispatch_tests` pins both on fixed input.
     #[test]
@@ -759,7 +775,7 @@ mod tests {
                 #[cfg(target_arch = "x86_64")]
                 {
                     let done = wide::rows_product((m, k, n), &wp, &x, xs, &bias, act, &mut both, n);
-                    assert_eq!(done, if avx512 { n - n % 16 } else { 0 });
+                    assert_eq!(done, if avx512 { n } else { 0 });
                 }
             }
         }
