@@ -423,7 +423,7 @@ const BLOCK_N: usize = 8;
 
 /// Columns of the input a 1 × 1 convolution copies together for [`rows_product`]: about
 /// 16 KB of input (`k` rows), in whole blocks of 32 (the AVX-512 kernel's widest step), at
-/// least one block (at most 32 KB for the networks' widest input, 240 channels: within a
+/// least one block (at most 32 KB for NanoTrack's widest input, 240 channels: within a
 /// 48 KB L1 cache) and at most 256. Its planes' rows lie a power of two apart (64 × 64
 /// values: 16 KB), where reading them in place maps every row to the same cache set.
 pub(super) fn tile_cols(k: usize) -> usize {
