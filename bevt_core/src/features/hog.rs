@@ -340,19 +340,24 @@ impl Hog {
         for x in 0..(wb * cell).min(side) {
             self.col_bin.push(split(x, wb));
         }
+        // Local slices, so the loop keeps the buffers' addresses in registers (through
+        // `self` they were reloaded after every store).
+        let hist = &mut self.hist[..];
+        let cols = &self.col_bin[..];
+        let n = cols.len();
         for y in 0..(hb * cell).min(side) {
             let (y0, y1, wy0, wy1) = split(y, hb);
             let (r0, r1) = (y0 * wb, y1 * wb);
-            let mrow = &self.mag[y * side..];
-            let brow = &self.bin[y * side..];
-            for (x, &(x0, x1, wx0, wx1)) in self.col_bin.iter().enumerate() {
-                let m = mrow[x] * norm;
-                let o = brow[x] as usize * nb;
+            let mrow = &self.mag[y * side..y * side + n];
+            let brow = &self.bin[y * side..y * side + n];
+            for ((&m, &o), &(x0, x1, wx0, wx1)) in mrow.iter().zip(brow).zip(cols) {
+                let m = m * norm;
+                let o = usize::from(o) * nb;
                 let (a, b) = (m * wy0, m * wy1);
-                self.hist[o + r0 + x0] += a * wx0;
-                self.hist[o + r0 + x1] += a * wx1;
-                self.hist[o + r1 + x0] += b * wx0;
-                self.hist[o + r1 + x1] += b * wx1;
+                hist[o + r0 + x0] += a * wx0;
+                hist[o + r0 + x1] += a * wx1;
+                hist[o + r1 + x0] += b * wx0;
+                hist[o + r1 + x1] += b * wx1;
             }
         }
     }
