@@ -470,13 +470,17 @@ fn sample_rect_into(
     // compiler unroll the sum instead of looping per output pixel.
     // `tmp` starts as zeros: a padded tap past the current row's range reads +0.
     let taps = out.cols.iter().map(|t| t.len).max().unwrap_or(1);
+    // One blended row per plane, each with `MAX_TAPS` values of slack.
+    let planes = sampler.planes;
+    let stride = w + MAX_TAPS;
     out.tmp.clear();
-    out.tmp.resize(w + MAX_TAPS, 0.0);
-    for p in 0..sampler.planes {
-        let src = &sampler.inter[p * w * h..(p + 1) * w * h];
-        for (r, rt) in out.rows.iter().enumerate() {
-            // Vertical pass into one row, then the horizontal pass.
-            let tmp = &mut out.tmp[cmin..cmax];
+    out.tmp.resize(planes * stride, 0.0);
+    let n = side * side;
+    for (r, rt) in out.rows.iter().enumerate() {
+        // Vertical pass into each plane's row, then the horizontal pass.
+        for p in 0..planes {
+            let src = &sampler.inter[p * w * h..(p + 1) * w * h];
+            let tmp = &mut out.tmp[p * stride + cmin..p * stride + cmax];
             tmp.iter_mut().for_each(|v| *v = 0.0);
             for t in 0..rt.len {
                 let wt = rt.w[t];
@@ -485,16 +489,56 @@ fn sample_rect_into(
                     *a += wt * b;
                 }
             }
-            let o = &mut out.data[(p * side + r) * side..(p * side + r + 1) * side];
+        }
+        if planes == 3 {
+            // The three planes in one pass over the columns (each column's taps read once).
+            let (d0, rest) = out.data.split_at_mut(n);
+            let (d1, d2) = rest.split_at_mut(n);
+            let row = r * side..(r + 1) * side;
+            let o = [&mut d0[row.clone()], &mut d1[row.clone()], &mut d2[row]];
+            let (t0, rest) = out.tmp.split_at(stride);
+            let (t1, t2) = rest.split_at(stride);
+            let t = [t0, t1, t2];
             match taps {
-                0 => columns::<0>(o, &out.cols, &out.tmp),
-                1 => columns::<1>(o, &out.cols, &out.tmp),
-                2 => columns::<2>(o, &out.cols, &out.tmp),
-                3 => columns::<3>(o, &out.cols, &out.tmp),
-                4 => columns::<4>(o, &out.cols, &out.tmp),
-                _ => columns::<MAX_TAPS>(o, &out.cols, &out.tmp),
+                0 => columns3::<0>(o, &out.cols, t),
+                1 => columns3::<1>(o, &out.cols, t),
+                2 => columns3::<2>(o, &out.cols, t),
+                3 => columns3::<3>(o, &out.cols, t),
+                4 => columns3::<4>(o, &out.cols, t),
+                _ => columns3::<MAX_TAPS>(o, &out.cols, t),
+            }
+            continue;
+        }
+        for p in 0..planes {
+            let o = &mut out.data[(p * side + r) * side..(p * side + r + 1) * side];
+            let tmp = &out.tmp[p * stride..(p + 1) * stride];
+            match taps {
+                0 => columns::<0>(o, &out.cols, tmp),
+                1 => columns::<1>(o, &out.cols, tmp),
+                2 => columns::<2>(o, &out.cols, tmp),
+                3 => columns::<3>(o, &out.cols, tmp),
+                4 => columns::<4>(o, &out.cols, tmp),
+                _ => columns::<MAX_TAPS>(o, &out.cols, tmp),
             }
         }
+    }
+}
+
+/// [`columns`] for three planes at once: each column's taps are read once for the three
+/// rows (the same sums, so the same bits).
+#[inline(always)] // into each clone of `sample_rect_into`
+fn columns3<const L: usize>(out: [&mut [f32]; 3], cols: &[Taps], tmp: [&[f32]; 3]) {
+    let [o0, o1, o2] = out;
+    let dst = o0.iter_mut().zip(o1.iter_mut()).zip(o2.iter_mut());
+    for (((o0, o1), o2), ct) in dst.zip(cols) {
+        let w = &ct.w[..L];
+        let dot = |t: &[f32]| -> f32 {
+            let src = &t[ct.start..ct.start + L];
+            src.iter().zip(w).map(|(a, b)| a * b).sum()
+        };
+        *o0 = dot(tmp[0]);
+        *o1 = dot(tmp[1]);
+        *o2 = dot(tmp[2]);
     }
 }
 
@@ -607,11 +651,29 @@ fn sample_bilinear_into(frame: &Frame<'_>, center: Point2, region: f32, out: &mu
                 *v = w0 * f32::from(a);
             }
         }
+        let taps = out.col_w.iter().zip(&out.col_bytes);
+        if planes == 3 && bpp >= 3 {
+            // The three planes in one pass over the columns: each column's taps read once,
+            // its two pixels' bytes as two short runs of the blended row.
+            let [o0, o1, o2] = offs.map(|o| o.min(2));
+            let (d0, rest) = out.data.split_at_mut(n);
+            let (d1, d2) = rest.split_at_mut(n);
+            let row = r * side..(r + 1) * side;
+            let (d0, d1, d2) = (&mut d0[row.clone()], &mut d1[row.clone()], &mut d2[row]);
+            let dst = d0.iter_mut().zip(d1.iter_mut()).zip(d2.iter_mut());
+            for (((d0, d1), d2), (&[w0, w1], &[b0, b1])) in dst.zip(taps) {
+                let (a, b) = (&out.tmp[b0..b0 + 3], &out.tmp[b1..b1 + 3]);
+                *d0 = w0 * a[o0] + w1 * b[o0];
+                *d1 = w0 * a[o1] + w1 * b[o1];
+                *d2 = w0 * a[o2] + w1 * b[o2];
+            }
+            continue;
+        }
         for p in 0..planes {
             let o = offs[p];
             let dst = &mut out.data[p * n + r * side..p * n + (r + 1) * side];
             let tmp = &out.tmp[o..];
-            for ((d, &[w0, w1]), &[b0, b1]) in dst.iter_mut().zip(&out.col_w).zip(&out.col_bytes) {
+            for (d, (&[w0, w1], &[b0, b1])) in dst.iter_mut().zip(taps.clone()) {
                 *d = w0 * tmp[b0] + w1 * tmp[b1];
             }
         }
@@ -675,8 +737,11 @@ fn column_sums_px<T: Copy + Into<u32>, const B: usize>(
 ) {
     let (s0, rest) = sums.split_at_mut(w);
     let (s1, s2) = rest.split_at_mut(w);
-    let (s0, s1, s2) = (&mut s0[..w], &mut s1[..w], &mut s2[..w]);
-    for (j, cols) in col_src.chunks_exact(factor).enumerate().take(w) {
+    // Each plane's byte within a pixel (`rgb_offsets` are below 3): in range by
+    // construction, so neither the reads below nor the zipped stores check bounds.
+    let [o0, o1, o2] = offs.map(|o| o.min(B - 1));
+    let dst = s0.iter_mut().zip(s1.iter_mut()).zip(s2.iter_mut());
+    for (cols, ((d0, d1), d2)) in col_src.chunks_exact(factor).zip(dst) {
         let mut s = [0u32; B];
         let (a, b) = (cols[0], cols[factor - 1]);
         if b == a + (factor - 1) * B {
@@ -693,10 +758,7 @@ fn column_sums_px<T: Copy + Into<u32>, const B: usize>(
                 }
             }
         }
-        let [o0, o1, o2] = offs;
-        if let (Some(a), Some(b), Some(c)) = (s.get(o0), s.get(o1), s.get(o2)) {
-            (s0[j], s1[j], s2[j]) = (*a, *b, *c);
-        }
+        (*d0, *d1, *d2) = (s[o0], s[o1], s[o2]);
     }
 }
 
