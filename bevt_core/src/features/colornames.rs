@@ -78,7 +78,16 @@ fn row_codes(pr: &[f32], pg: &[f32], pb: &[f32], codes: &mut [u32]) {
 /// (`CN_CHANNELS` channel-major maps of `rows × cols` cells, each `cell × cell` pixels).
 /// Does nothing for a one-plane patch (the caller does not allocate the group then).
 pub fn cell_colornames(patch: &Patch, cell: usize, rows: usize, cols: usize, out: &mut [f32]) {
-    cell_colornames_with(patch, cell, rows, cols, out, &mut Vec::new());
+    cell_colornames_with(patch, cell, rows, cols, out, &mut Scratch::default());
+}
+
+/// Reusable buffers of [`cell_colornames_with`].
+#[derive(Debug, Clone, Default)]
+pub struct Scratch {
+    /// Colour-name table indices of one patch row.
+    codes: Vec<u32>,
+    /// One row of cells' channel sums, cell-major.
+    acc: Vec<[f32; CN_CHANNELS]>,
 }
 
 /// [`cell_colornames`] with a caller-owned scratch buffer (no allocation once it has grown
@@ -90,20 +99,25 @@ pub fn cell_colornames_with(
     rows: usize,
     cols: usize,
     out: &mut [f32],
-    codes: &mut Vec<u32>,
+    scratch: &mut Scratch,
 ) {
     let nb = rows * cols;
     if patch.planes < 3 || out.len() < CN_CHANNELS * nb || cell == 0 {
         return;
     }
     let out = &mut out[..CN_CHANNELS * nb];
-    out.iter_mut().for_each(|v| *v = 0.0);
     let t = table();
     let side = patch.side;
     let n = side * side;
     let width = (cols * cell).min(side);
     let inv = 1.0 / (cell * cell) as f32;
+    // One row of cells' sums, cell-major (`acc[cx][d]`), added to pixel row by pixel row in
+    // the order the output maps took them (from +0), then written to the channel-major maps
+    // once per row of cells instead of once per pixel row.
+    let Scratch { codes, acc } = scratch;
+    acc.resize(cols, [0.0; CN_CHANNELS]);
     for cy in 0..rows {
+        acc.iter_mut().for_each(|a| *a = [0.0; CN_CHANNELS]);
         for r in cy * cell..((cy + 1) * cell).min(side) {
             let i = r * side;
             let (pr, pg, pb) = (
@@ -123,10 +137,15 @@ pub fn cell_colornames_with(
                         *s += v;
                     }
                 }
-                let k = cy * cols + cx;
-                for (d, s) in sum.iter().enumerate() {
-                    out[d * nb + k] += s * inv;
+                for (a, s) in acc[cx].iter_mut().zip(&sum) {
+                    *a += s * inv;
                 }
+            }
+        }
+        for (d, plane) in out.chunks_exact_mut(nb).enumerate() {
+            let dst = &mut plane[cy * cols..(cy + 1) * cols];
+            for (o, a) in dst.iter_mut().zip(acc.iter()) {
+                *o = a[d];
             }
         }
     }

@@ -49,8 +49,8 @@ pub struct Hog {
     row_gx: Vec<f32>,
     row_gy: Vec<f32>,
     row_m2: Vec<f32>,
-    /// Colour-name table indices of one patch row.
-    cn_codes: Vec<u32>,
+    /// Colour names' row buffers.
+    cn_scratch: colornames::Scratch,
 }
 
 /// `atan2(y, x)` in (−π, π] to within 1e-5 rad (a minimax polynomial on [0, 1]), far below
@@ -131,7 +131,7 @@ impl Hog {
             row_gx: Vec::new(),
             row_gy: Vec::new(),
             row_m2: Vec::new(),
-            cn_codes: Vec::new(),
+            cn_scratch: colornames::Scratch::default(),
         }
     }
 
@@ -529,7 +529,7 @@ impl FeatureExtractor for Hog {
                 hb,
                 wb,
                 &mut out.data[next * nb..(next + colornames::CN_CHANNELS) * nb],
-                &mut self.cn_codes,
+                &mut self.cn_scratch,
             );
         }
         Ok(())
