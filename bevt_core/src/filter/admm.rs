@@ -809,18 +809,17 @@ mod tests {
         assert!(k100 < k10, "κ=100: {k100} vs κ=10 {k10}");
     }
 
-    /// The solver keeps its spectra between frames and clears only what the next training
-    /// reads before writing: a solver that trained on other data (and a ĝ buffer full of
-    /// it) gives a fresh solver's bits, for every iteration count, with and without the
-    /// temporal term's first frame.
-    #[test]
-    fn a_reused_solver_gives_a_fresh_solvers_bits() {
-        let grid = GridSize { h: 20, w: 24 };
-        let d = 3;
+    /// Two random `d`-channel feature spectra and a Gaussian label's spectrum on `grid` (the
+    /// LCG seeded with `seed`), with the planned transform.
+    fn two_samples_and_label(
+        grid: GridSize,
+        d: usize,
+        seed: u64,
+    ) -> (Fft2, Vec<Complex32>, Vec<Complex32>, Vec<Complex32>) {
         let mut fft = Fft2::new(grid);
         let bins = fft.spectrum_len();
-        let mut s = 5u64;
-        let mut spectra = |fft: &mut Fft2| {
+        let mut s = seed;
+        let mut sample = |fft: &mut Fft2| {
             let mut xs = vec![0.0f32; grid.len()];
             let mut xf = vec![Complex32::default(); d * bins];
             for j in 0..d {
@@ -829,11 +828,24 @@ mod tests {
             }
             xf
         };
-        let (xa, xb) = (spectra(&mut fft), spectra(&mut fft));
+        let (x1, x2) = (sample(&mut fft), sample(&mut fft));
         let mut y = vec![0.0; grid.len()];
         gaussian_label(grid, 1.0, &mut y);
         let mut yf = vec![Complex32::default(); bins];
         fft.forward(&y, &mut yf);
+        (fft, x1, x2, yf)
+    }
+
+    /// The solver keeps its spectra between frames and clears only what the next training
+    /// reads before writing: a solver that trained on other data (and a ĝ buffer full of
+    /// it) gives a fresh solver's bits, for every iteration count, with and without the
+    /// temporal term's first frame.
+    #[test]
+    fn a_reused_solver_gives_a_fresh_solvers_bits() {
+        let grid = GridSize { h: 20, w: 24 };
+        let d = 3;
+        let (mut fft, xa, xb, yf) = two_samples_and_label(grid, d, 5);
+        let bins = fft.spectrum_len();
         let reg = reg_window(grid, Size2 { w: 30.0, h: 26.0 }, 4, 0.1, 0.8);
         for (penalty, iterations) in [
             (PenaltyKind::Elementwise, 3),
@@ -870,23 +882,8 @@ mod tests {
     fn temporal_term_pulls_the_filter_towards_the_previous_one() {
         let grid = GridSize { h: 16, w: 16 };
         let d = 3;
-        let mut fft = Fft2::new(grid);
+        let (mut fft, x1, x2, yf) = two_samples_and_label(grid, d, 11);
         let bins = fft.spectrum_len();
-        let mut s = 11u64;
-        let mut sample = |fft: &mut Fft2| {
-            let mut xs = vec![0.0f32; grid.len()];
-            let mut xf = vec![Complex32::default(); d * bins];
-            for j in 0..d {
-                xs.iter_mut().for_each(|v| *v = lcg(&mut s));
-                fft.forward(&xs, &mut xf[j * bins..(j + 1) * bins]);
-            }
-            xf
-        };
-        let (x1, x2) = (sample(&mut fft), sample(&mut fft));
-        let mut y = vec![0.0; grid.len()];
-        gaussian_label(grid, 1.0, &mut y);
-        let mut yf = vec![Complex32::default(); bins];
-        fft.forward(&y, &mut yf);
         let reg = reg_window(grid, Size2 { w: 24.0, h: 24.0 }, 4, 0.1, 0.8);
         let crop = CropBox::centred(grid, GridSize { h: 6, w: 6 });
         let train = |theta: f32, fft: &mut Fft2| {
