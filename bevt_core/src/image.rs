@@ -233,6 +233,9 @@ pub struct Sampler {
     col_src: Vec<usize>,
     /// Integer box sums of one output row, plane-major.
     col_sum: Vec<u32>,
+    /// Sums of `factor` consecutive pixels' row sums at every byte of the span
+    /// ([`column_sums_boxed`]).
+    boxed: Vec<u16>,
 }
 
 impl Sampler {
@@ -397,6 +400,17 @@ fn prepare_into(
                 }
             }
             continue;
+        } else if factor <= BOXED_MAX_FACTOR {
+            column_sums_boxed(
+                &sampler.acc16,
+                &mut sampler.boxed,
+                &sampler.col_src,
+                bpp,
+                offs,
+                factor,
+                (left, right),
+                &mut sampler.col_sum,
+            );
         } else {
             column_sums(
                 &sampler.acc16,
@@ -720,6 +734,65 @@ fn column_sums<T: Copy + Into<u32>>(
                     *o = cols.iter().map(|&c| acc[c + off].into()).sum();
                 }
             }
+        }
+    }
+}
+
+/// Largest box factor [`column_sums_boxed`] takes: its sums of `factor` row sums of
+/// `factor` bytes each stay below 2^16 (`16² · 255 = 65,280`).
+const BOXED_MAX_FACTOR: usize = 16;
+
+/// [`column_sums`] of `u16` row sums for `factor ≤ BOXED_MAX_FACTOR`, the same values.
+/// Output columns whose pixels all lie in the frame (`j·factor ≥ left`, `(j+1)·factor ≤
+/// right`: consecutive pixels of the span) read one value each of `boxed`, the sums of
+/// `factor` consecutive pixels' row sums at every byte of the span, built in `factor` passes
+/// over the row that vectorise (where each output column took `factor · bpp` scalar adds,
+/// most of the region's preparation for large targets); the columns that replicate the
+/// frame's border are summed one by one. Exact integer sums, so the order of the additions
+/// does not matter.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn column_sums_boxed(
+    acc: &[u16],
+    boxed: &mut Vec<u16>,
+    col_src: &[usize],
+    bpp: usize,
+    offs: [usize; 3],
+    factor: usize,
+    (left, right): (usize, usize),
+    sums: &mut [u32],
+) {
+    debug_assert!((2..=BOXED_MAX_FACTOR).contains(&factor));
+    let planes = if bpp == 1 { 1 } else { 3 };
+    let w = sums.len() / planes;
+    let offs = offs.map(|o| o.min(bpp - 1));
+    let j0 = left.div_ceil(factor).min(w);
+    let j1 = (right / factor).clamp(j0, w);
+    for j in (0..j0).chain(j1..w) {
+        let cols = &col_src[j * factor..(j + 1) * factor];
+        for (p, &off) in offs.iter().enumerate().take(planes) {
+            sums[p * w + j] = cols.iter().map(|&c| u32::from(acc[c + off])).sum();
+        }
+    }
+    if j1 == j0 {
+        return;
+    }
+    // Output column j's first pixel is span pixel `j·factor − left`.
+    let start = (j0 * factor - left) * bpp;
+    let step = factor * bpp;
+    let n = (j1 - j0) * step - (factor - 1) * bpp;
+    boxed.clear();
+    boxed.extend_from_slice(&acc[start..start + n]);
+    for t in 1..factor {
+        let src = &acc[start + t * bpp..start + t * bpp + n];
+        for (b, &a) in boxed.iter_mut().zip(src) {
+            *b += a;
+        }
+    }
+    for (p, &off) in offs.iter().enumerate().take(planes) {
+        let dst = &mut sums[p * w + j0..p * w + j1];
+        for (d, &v) in dst.iter_mut().zip(boxed[off..].iter().step_by(step)) {
+            *d = u32::from(v);
         }
     }
 }
@@ -1112,7 +1185,42 @@ mod tests {
         // Regions over each edge and beyond the frame (whole output rows and columns
         // outside it), every pixel format, factors 1 to 4: each box average is the exact
         // integer sum of the clamped pixels times 1/factor².
-        let (w, h) = (23, 13);
+        for (cx, cy, region, out_side) in [
+            (2.0, 1.0, 40.0, 40),
+            (11.0, 6.0, 60.0, 20),
+            (21.5, 12.0, 45.0, 15),
+            (0.0, 12.9, 80.0, 20),
+            (12.0, 0.0, 9.0, 9),
+        ] {
+            assert_prepared_region_exact(23, 13, cx, cy, region, out_side, None);
+        }
+    }
+
+    #[test]
+    fn prepared_region_is_exact_for_large_factors_inside_and_over_the_edges() {
+        // Factors 2 to 17 (the boxed column sums up to 16, the one-by-one sums above) on a
+        // frame wide enough for many output columns inside it, the region inside the frame,
+        // over its left edge and over its right edge.
+        for fac in [2usize, 3, 5, 8, 15, 16, 17] {
+            for (cx, out_side) in [(200.0, 12), (10.0, 9), (395.0, 7)] {
+                let region = (fac * out_side) as f32;
+                assert_prepared_region_exact(400, 30, cx, 15.0, region, out_side, Some(fac));
+            }
+        }
+    }
+
+    /// Prepares a `region` around (`cx`, `cy`) of a `w × h` frame in every pixel format and
+    /// checks each box average against the exact integer sum of the clamped pixels times
+    /// 1/factor² (and the factor, when given).
+    fn assert_prepared_region_exact(
+        w: usize,
+        h: usize,
+        cx: f32,
+        cy: f32,
+        region: f32,
+        out_side: usize,
+        factor: Option<usize>,
+    ) {
         for format in [
             PixelFormat::Rgb8,
             PixelFormat::Bgr8,
@@ -1126,39 +1234,34 @@ mod tests {
                 .collect();
             let f = Frame::packed(&d, w, h, format).unwrap();
             let offs = format.rgb_offsets();
-            for (cx, cy, region, out_side) in [
-                (2.0, 1.0, 40.0, 40),
-                (11.0, 6.0, 60.0, 20),
-                (21.5, 12.0, 45.0, 15),
-                (0.0, 12.9, 80.0, 20),
-                (12.0, 0.0, 9.0, 9),
-            ] {
-                let mut s = Sampler::default();
-                s.prepare(&f, Point2 { x: cx, y: cy }, region, region, out_side);
-                let fac = s.factor;
-                let inv = 1.0 / (fac * fac) as f32;
-                let px = |x: isize, y: isize, p: usize| {
-                    let (x, y) = (x.clamp(0, w as isize - 1), y.clamp(0, h as isize - 1));
-                    u32::from(d[(y as usize * w + x as usize) * bpp + offs[p]])
-                };
-                for p in 0..format.planes() {
-                    for r in 0..s.inter_h {
-                        for col in 0..s.inter_w {
-                            let mut sum = 0u32;
-                            for dy in 0..fac {
-                                for dx in 0..fac {
-                                    let x = s.ox as isize + (col * fac + dx) as isize;
-                                    let y = s.oy as isize + (r * fac + dy) as isize;
-                                    sum += px(x, y, p);
-                                }
+            let mut s = Sampler::default();
+            s.prepare(&f, Point2 { x: cx, y: cy }, region, region, out_side);
+            let fac = s.factor;
+            if let Some(want) = factor {
+                assert_eq!(fac, want, "{format:?} region {region} side {out_side}");
+            }
+            let inv = 1.0 / (fac * fac) as f32;
+            let px = |x: isize, y: isize, p: usize| {
+                let (x, y) = (x.clamp(0, w as isize - 1), y.clamp(0, h as isize - 1));
+                u32::from(d[(y as usize * w + x as usize) * bpp + offs[p]])
+            };
+            for p in 0..format.planes() {
+                for r in 0..s.inter_h {
+                    for col in 0..s.inter_w {
+                        let mut sum = 0u32;
+                        for dy in 0..fac {
+                            for dx in 0..fac {
+                                let x = s.ox as isize + (col * fac + dx) as isize;
+                                let y = s.oy as isize + (r * fac + dy) as isize;
+                                sum += px(x, y, p);
                             }
-                            let got = s.inter[(p * s.inter_h + r) * s.inter_w + col];
-                            assert_eq!(
-                                got.to_bits(),
-                                (sum as f32 * inv).to_bits(),
-                                "{format:?} factor {fac} plane {p} row {r} col {col}"
-                            );
                         }
+                        let got = s.inter[(p * s.inter_h + r) * s.inter_w + col];
+                        assert_eq!(
+                            got.to_bits(),
+                            (sum as f32 * inv).to_bits(),
+                            "{format:?} factor {fac} plane {p} row {r} col {col} centre {cx}"
+                        );
                     }
                 }
             }
