@@ -495,13 +495,17 @@ fn sample_rect_into(
         for p in 0..planes {
             let src = &sampler.inter[p * w * h..(p + 1) * w * h];
             let tmp = &mut out.tmp[p * stride + cmin..p * stride + cmax];
-            tmp.iter_mut().for_each(|v| *v = 0.0);
-            for t in 0..rt.len {
-                let wt = rt.w[t];
-                let row = &src[(rt.start + t) * w + cmin..(rt.start + t) * w + cmax];
-                for (a, b) in tmp.iter_mut().zip(row) {
-                    *a += wt * b;
-                }
+            let src = &src[rt.start * w + cmin..];
+            match rt.len {
+                0 => tmp.iter_mut().for_each(|v| *v = 0.0),
+                1 => rows::<1>(tmp, src, w, &rt.w),
+                2 => rows::<2>(tmp, src, w, &rt.w),
+                3 => rows::<3>(tmp, src, w, &rt.w),
+                4 => rows::<4>(tmp, src, w, &rt.w),
+                5 => rows::<5>(tmp, src, w, &rt.w),
+                6 => rows::<6>(tmp, src, w, &rt.w),
+                7 => rows::<7>(tmp, src, w, &rt.w),
+                _ => rows::<MAX_TAPS>(tmp, src, w, &rt.w),
             }
         }
         if planes == 3 {
@@ -535,6 +539,24 @@ fn sample_rect_into(
                 _ => columns::<MAX_TAPS>(o, &out.cols, tmp),
             }
         }
+    }
+}
+
+/// `sample_rect`'s vertical pass over one plane's row: `tmp[c] = 0 + w₀·row₀[c] + w₁·row₁[c]
+/// + …` over the `L` source rows starting at `src` (`w` values apart), summed in tap order
+/// from +0 as one pass per tap into a zeroed row did, in a single pass over the row (the
+/// same operations per value, so the same bits, without storing and reloading the row per
+/// tap).
+#[inline(always)] // into each clone of `sample_rect_into`
+fn rows<const L: usize>(tmp: &mut [f32], src: &[f32], w: usize, wt: &[f32; MAX_TAPS]) {
+    let n = tmp.len();
+    let rows: [&[f32]; L] = std::array::from_fn(|t| &src[t * w..t * w + n]);
+    for (c, a) in tmp.iter_mut().enumerate() {
+        let mut s = 0.0f32;
+        for t in 0..L {
+            s += wt[t] * rows[t][c];
+        }
+        *a = s;
     }
 }
 
@@ -853,6 +875,7 @@ impl Taps {
     /// Weights for an output pixel centred at source coordinate `u` (pixel centres at
     /// integers) with footprint `width` source pixels, over `n` source pixels; indices
     /// outside `0..n` replicate the border.
+    #[inline] // into the samplers' clones (their `floor`s compile to one instruction there)
     fn new(u: f32, width: f32, n: usize) -> Self {
         let mut t = Taps {
             start: 0,
