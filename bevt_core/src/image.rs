@@ -542,11 +542,11 @@ fn sample_rect_into(
     }
 }
 
-/// `sample_rect`'s vertical pass over one plane's row: `tmp[c] = 0 + w₀·row₀[c] + w₁·row₁[c]
-/// + …` over the `L` source rows starting at `src` (`w` values apart), summed in tap order
-/// from +0 as one pass per tap into a zeroed row did, in a single pass over the row (the
-/// same operations per value, so the same bits, without storing and reloading the row per
-/// tap).
+/// `sample_rect`'s vertical pass over one plane's row: `tmp[c] = ((0 + w₀·row₀[c]) +
+/// w₁·row₁[c]) …` over the `L` source rows starting at `src` (`w` values apart), summed in
+/// tap order from +0 as one pass per tap into a zeroed row did, in a single pass over the
+/// row (the same operations per value, so the same bits, without storing and reloading the
+/// row per tap).
 #[inline(always)] // into each clone of `sample_rect_into`
 fn rows<const L: usize>(tmp: &mut [f32], src: &[f32], w: usize, wt: &[f32; MAX_TAPS]) {
     let n = tmp.len();
