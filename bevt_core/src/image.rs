@@ -362,6 +362,21 @@ fn prepare_into(
             continue;
         }
         prev_clamped = clamped;
+        if factor == 1 {
+            // Single pixels, read from the frame row itself (no row sums to build).
+            let sy = first.clamp(0, fh - 1) as usize;
+            let start = sy * stride + first_x * bpp;
+            pixels_row(
+                &data[start..start + bytes],
+                &sampler.col_src,
+                bpp,
+                offs,
+                (left, right),
+                &mut sampler.inter,
+                (r, w, h, planes),
+            );
+            continue;
+        }
         sampler.acc32.iter_mut().for_each(|v| *v = 0);
         for k in 0..factor {
             if batched && k > 0 && k % U16_ROWS == 0 {
@@ -391,15 +406,6 @@ fn prepare_into(
                 factor,
                 &mut sampler.col_sum,
             );
-        } else if factor == 1 {
-            // Single pixels: a plain per-plane gather (inv = 1).
-            for p in 0..planes {
-                let out = &mut sampler.inter[(p * h + r) * w..(p * h + r + 1) * w];
-                for (o, &c) in out.iter_mut().zip(&sampler.col_src) {
-                    *o = f32::from(sampler.acc16[c + offs[p]]);
-                }
-            }
-            continue;
         } else if factor <= BOXED_MAX_FACTOR {
             column_sums_boxed(
                 &sampler.acc16,
@@ -756,6 +762,54 @@ fn column_sums<T: Copy + Into<u32>>(
                     *o = cols.iter().map(|&c| acc[c + off].into()).sum();
                 }
             }
+        }
+    }
+}
+
+/// Row `r` of a region prepared at factor 1 (`inter` plane-major, `w × h` per plane) from
+/// the frame row's span `src`: the region columns inside the frame (`left..right`, span
+/// pixels `0..right − left`) converted in one pass over the span's pixels, three planes at
+/// a time for 3-byte pixels; the columns replicating the frame's border through `col_src`.
+/// Each value is its byte as `f32`, as the per-column gather gave.
+#[inline(always)]
+fn pixels_row(
+    src: &[u8],
+    col_src: &[usize],
+    bpp: usize,
+    offs: [usize; 3],
+    (left, right): (usize, usize),
+    inter: &mut [f32],
+    (r, w, h, planes): (usize, usize, usize, usize),
+) {
+    let offs = offs.map(|o| o.min(bpp - 1));
+    for (p, &off) in offs.iter().enumerate().take(planes) {
+        let out = &mut inter[(p * h + r) * w..(p * h + r + 1) * w];
+        for x in (0..left).chain(right..w) {
+            out[x] = f32::from(src[col_src[x] + off]);
+        }
+    }
+    if right <= left {
+        return;
+    }
+    let span = &src[..(right - left) * bpp];
+    if planes == 3 && bpp == 3 {
+        let (a, rest) = inter.split_at_mut(h * w);
+        let (b, c) = rest.split_at_mut(h * w);
+        let row = r * w + left..r * w + right;
+        let (a, b, c) = (&mut a[row.clone()], &mut b[row.clone()], &mut c[row]);
+        let [o0, o1, o2] = offs;
+        let dst = a.iter_mut().zip(b.iter_mut()).zip(c.iter_mut());
+        for (((a, b), c), px) in dst.zip(span.chunks_exact(3)) {
+            *a = f32::from(px[o0]);
+            *b = f32::from(px[o1]);
+            *c = f32::from(px[o2]);
+        }
+        return;
+    }
+    for (p, &off) in offs.iter().enumerate().take(planes) {
+        let out = &mut inter[(p * h + r) * w + left..(p * h + r) * w + right];
+        for (o, px) in out.iter_mut().zip(span.chunks_exact(bpp)) {
+            *o = f32::from(px[off]);
         }
     }
 }
@@ -1221,10 +1275,10 @@ mod tests {
 
     #[test]
     fn prepared_region_is_exact_for_large_factors_inside_and_over_the_edges() {
-        // Factors 2 to 17 (the boxed column sums up to 16, the one-by-one sums above) on a
+        // Factors 1 to 17 (single pixels, the boxed column sums up to 16, the one-by-one sums above) on a
         // frame wide enough for many output columns inside it, the region inside the frame,
         // over its left edge and over its right edge.
-        for fac in [2usize, 3, 5, 8, 15, 16, 17] {
+        for fac in [1usize, 2, 3, 5, 8, 15, 16, 17] {
             for (cx, out_side) in [(200.0, 12), (10.0, 9), (395.0, 7)] {
                 let region = (fac * out_side) as f32;
                 assert_prepared_region_exact(400, 30, cx, 15.0, region, out_side, Some(fac));
