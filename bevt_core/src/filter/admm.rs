@@ -878,6 +878,226 @@ mod tests {
         }
     }
 
+    /// The solver as of eb06111, kept as the bit reference for the fused one: every
+    /// iteration runs the g-step over all channels, then the h-step over all channels, then
+    /// the l-update as a pass of its own, and l̂ is cleared before the first iteration.
+    fn reference_train(
+        s: &mut AdmmSolver,
+        fft: &mut Fft2,
+        xf: &[Complex32],
+        yf: &[Complex32],
+        g_f: &mut [Complex32],
+        iterations: usize,
+    ) {
+        let (bins, d) = (s.bins, s.channels);
+        let t = s.grid.len() as f32;
+        let theta = if s.temporal > 0.0 && s.primed {
+            s.g_prev.copy_from_slice(g_f);
+            s.temporal
+        } else {
+            0.0
+        };
+        s.primed = true;
+        let iterations = iterations.min(s.mus.len());
+        s.l_f.iter_mut().for_each(|v| *v = Complex32::default());
+        if theta > 0.0 {
+            s.h_f.iter_mut().for_each(|v| *v = Complex32::default());
+        }
+        if iterations == 0 {
+            g_f.iter_mut().for_each(|v| *v = Complex32::default());
+        }
+        s.s_xx.iter_mut().for_each(|v| *v = 0.0);
+        for x in xf.chunks_exact(bins).take(d) {
+            for (sx, v) in s.s_xx.iter_mut().zip(x) {
+                *sx += f64::from(v.norm_sqr());
+            }
+        }
+        for it in 0..iterations {
+            let mu = s.mus[it];
+            if theta > 0.0 {
+                let m = mu + theta;
+                for ((p, h), g) in s.pull.iter_mut().zip(&s.h_f).zip(&s.g_prev) {
+                    *p = (h * mu + g * theta) / m;
+                }
+                std::mem::swap(&mut s.h_f, &mut s.pull);
+                reference_g_step(s, xf, yf, g_f, m, t, false);
+                std::mem::swap(&mut s.h_f, &mut s.pull);
+            } else {
+                reference_g_step(s, xf, yf, g_f, mu, t, it == 0);
+            }
+            if it + 1 < iterations {
+                reference_h_step(s, fft, g_f, it, mu);
+                for ((l, g), h) in s.l_f.iter_mut().zip(g_f.iter()).zip(&s.h_f) {
+                    *l += (g - h) * mu;
+                }
+            }
+        }
+    }
+
+    /// The g-step of [`reference_train`], over all channels at once.
+    fn reference_g_step(
+        s: &mut AdmmSolver,
+        xf: &[Complex32],
+        yf: &[Complex32],
+        g_f: &mut [Complex32],
+        mu: f32,
+        t: f32,
+        lh_zero: bool,
+    ) {
+        let bins = s.bins;
+        if lh_zero {
+            s.s_lx.iter_mut().for_each(|v| *v = Complex64::default());
+            s.s_hx.iter_mut().for_each(|v| *v = Complex64::default());
+        } else {
+            channel_sums(
+                xf,
+                &s.l_f,
+                &s.h_f,
+                bins,
+                s.channels,
+                &mut s.s_lx,
+                &mut s.s_hx,
+            );
+        }
+        let mu64 = f64::from(mu);
+        let tmu = f64::from(t) * mu64;
+        for k in 0..bins {
+            let b = s.s_xx[k] + tmu;
+            let c = (c64(yf[k]) + s.s_lx[k] / mu64 - s.s_hx[k]) / b;
+            s.coef[k] = Complex32::new(c.re as f32, c.im as f32);
+        }
+        if lh_zero {
+            g_update_first(g_f, xf, &s.coef, 1.0 / mu);
+        } else {
+            g_update(g_f, xf, &s.l_f, &s.h_f, &s.coef, 1.0 / mu);
+        }
+    }
+
+    /// The h-step of [`reference_train`], over all channels at once, through
+    /// [`Fft2::inverse`] / [`Fft2::inverse_rows`] from a spectrum of its own.
+    fn reference_h_step(s: &mut AdmmSolver, fft: &mut Fft2, g_f: &[Complex32], it: usize, mu: f32) {
+        let bins = s.bins;
+        let w = s.grid.w;
+        let CropBox { r0, r1, c0, c1 } = s.crop;
+        let mut spat = vec![0.0f32; s.grid.len()];
+        let mut spat2 = vec![0.0f32; s.grid.len()];
+        for ch in 0..s.channels {
+            let g = &g_f[ch * bins..(ch + 1) * bins];
+            let l = &s.l_f[ch * bins..(ch + 1) * bins];
+            for ((t, g), l) in s.tmp_f.iter_mut().zip(g).zip(l) {
+                *t = g * mu + l;
+            }
+            match &s.penalty {
+                PenaltyData::Matrix(ps) => {
+                    for r in r0..r1 {
+                        spat2[r * w + c0..r * w + c1]
+                            .iter_mut()
+                            .for_each(|v| *v = 0.0);
+                    }
+                    let h = s.grid.h;
+                    fft.inverse(&s.tmp_f, &mut spat);
+                    let p = &ps[it];
+                    for r in r0..r1 {
+                        let prow = &p[(r - r0) * h..(r - r0 + 1) * h];
+                        let out = &mut spat2[r * w + c0..r * w + c1];
+                        for (k, &pk) in prow.iter().enumerate() {
+                            let src = &spat[k * w + c0..k * w + c1];
+                            for (o, s) in out.iter_mut().zip(src) {
+                                *o += pk * s;
+                            }
+                        }
+                    }
+                }
+                PenaltyData::Elementwise(ws) => {
+                    fft.inverse_rows(&s.tmp_f, r0, r1, &mut spat);
+                    let bw = c1 - c0;
+                    let wv = &ws[it];
+                    for r in r0..r1 {
+                        for c in c0..c1 {
+                            spat2[r * w + c] = spat[r * w + c] * wv[(r - r0) * bw + c - c0];
+                        }
+                    }
+                }
+                PenaltyData::Scalar(sc) => {
+                    fft.inverse_rows(&s.tmp_f, r0, r1, &mut spat);
+                    let sc = sc[it];
+                    for r in r0..r1 {
+                        for c in c0..c1 {
+                            spat2[r * w + c] = spat[r * w + c] * sc;
+                        }
+                    }
+                }
+            }
+            fft.forward_rows(&spat2, r0, r1, &mut s.h_f[ch * bins..(ch + 1) * bins]);
+        }
+    }
+
+    /// The trainer's filter has the bits of [`reference_train`]'s for 0–3 iterations, every
+    /// penalty, square and non-square grids (even and odd widths), without and with the
+    /// temporal term (whose first training has no previous filter; the second and third
+    /// are pulled), on solvers that keep their state across trainings.
+    #[test]
+    fn fused_training_gives_the_unfused_reference_bits() {
+        let bits = |v: &[Complex32]| -> Vec<(u32, u32)> {
+            v.iter().map(|z| (z.re.to_bits(), z.im.to_bits())).collect()
+        };
+        let mut cases = 0;
+        for (grid, seed) in [
+            (GridSize { h: 20, w: 24 }, 3u64),
+            (GridSize { h: 18, w: 18 }, 7),
+            (GridSize { h: 15, w: 17 }, 13),
+        ] {
+            let d = 5;
+            let (mut fft, xa, xb, yf) = two_samples_and_label(grid, d, seed);
+            let bins = fft.spectrum_len();
+            // A third sample: arbitrary complex values, not a real map's spectrum.
+            let mut s = seed ^ 0x5eed;
+            let xc: Vec<Complex32> = (0..d * bins)
+                .map(|_| Complex32::new(lcg(&mut s) * 40.0, lcg(&mut s) * 40.0))
+                .collect();
+            let reg = reg_window(grid, Size2 { w: 30.0, h: 26.0 }, 4, 0.1, 0.8);
+            let crop = CropBox::centred(grid, GridSize { h: 6, w: 7 });
+            for penalty in [
+                PenaltyKind::Matrix,
+                PenaltyKind::Elementwise,
+                PenaltyKind::None,
+            ] {
+                for temporal in [0.0, 15.0] {
+                    for iterations in 0..=3 {
+                        let params = AdmmConfig {
+                            iterations: 3,
+                            penalty,
+                            temporal,
+                            ..AdmmConfig::default()
+                        };
+                        let mut fused = AdmmSolver::new(grid, bins, d, &params, &reg, crop);
+                        let mut reference = fused.clone();
+                        let mut got = vec![Complex32::default(); d * bins];
+                        let mut want = got.clone();
+                        for (n, x) in [&xa, &xb, &xc].into_iter().enumerate() {
+                            fused.train_iterations(&mut fft, x, &yf, &mut got, iterations);
+                            reference_train(
+                                &mut reference,
+                                &mut fft,
+                                x,
+                                &yf,
+                                &mut want,
+                                iterations,
+                            );
+                            assert!(
+                                bits(&got) == bits(&want),
+                                "{grid:?} {penalty:?} θ {temporal} {iterations} it., training {n}"
+                            );
+                            assert!(iterations == 0 || want.iter().any(|v| v.norm_sqr() > 0.0));
+                            cases += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert_eq!(cases, 3 * 3 * 2 * 4 * 3);
+    }
+
     #[test]
     fn temporal_term_pulls_the_filter_towards_the_previous_one() {
         let grid = GridSize { h: 16, w: 16 };
