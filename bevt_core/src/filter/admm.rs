@@ -237,7 +237,7 @@ impl AdmmSolver {
 
     /// [`Self::train`] stopped after `iterations` g-updates (for tests and ablations).
     ///
-    /// Each iteration sums over the channels once ([`Self::g_coef`]); everything after that
+    /// Each iteration sums over the channels once (`g_coef`); everything after that
     /// is per channel and runs a channel at a time: its ĝ-update, then (unless this is the
     /// last iteration) its h-step and its l-update `l̂ += (ĝ − ĥ)μ`. A channel's three
     /// updates read only that channel's ĝ, ĥ, l̂ and the per-bin coefficient, so running
