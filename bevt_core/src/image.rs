@@ -929,7 +929,7 @@ impl Taps {
     /// Weights for an output pixel centred at source coordinate `u` (pixel centres at
     /// integers) with footprint `width` source pixels, over `n` source pixels; indices
     /// outside `0..n` replicate the border.
-    #[inline] // into the samplers' clones (their `floor`s compile to one instruction there)
+    #[inline(always)] // into the samplers' clones (their `floor`s compile to one instruction there)
     fn new(u: f32, width: f32, n: usize) -> Self {
         let mut t = Taps {
             start: 0,
