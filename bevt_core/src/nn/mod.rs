@@ -880,6 +880,42 @@ impl Runner {
             .collect())
     }
 
+    /// [`Self::run`] on a plan of one input, taken by exchange instead of copied: `input`
+    /// is the input's buffer during the run and is given back unchanged (steps only read a
+    /// plan's inputs: every step writes a new buffer). A network input of a few hundred KB
+    /// (a 255-px crop is 780 KB) is then not copied once a pass. Where the input is also an
+    /// output, it is copied as [`Self::run`] does.
+    ///
+    /// # Errors
+    /// A plan of more than one input, or a wrong length.
+    pub fn run_exchanging(&mut self, input: &mut Vec<f32>) -> Result<Vec<&[f32]>, Error> {
+        let plan = std::sync::Arc::clone(&self.plan);
+        let slot = match plan.inputs.as_slice() {
+            [(_, slot, _)] => *slot,
+            other => return Err(format!("{} inputs; the plan has 1", other.len())),
+        };
+        if plan.outputs.iter().any(|(_, s, _)| *s == slot) {
+            return self.run(&[input.as_slice()]);
+        }
+        if self.bufs[slot].len() != input.len() {
+            let (name, _, shape) = &plan.inputs[0];
+            return Err(format!(
+                "input `{name}`: {} values for shape {shape:?}",
+                input.len()
+            ));
+        }
+        std::mem::swap(&mut self.bufs[slot], input);
+        for step in &plan.steps {
+            self.step(step);
+        }
+        std::mem::swap(&mut self.bufs[slot], input);
+        Ok(plan
+            .outputs
+            .iter()
+            .map(|(_, slot, _)| self.bufs[*slot].as_slice())
+            .collect())
+    }
+
     /// `bufs[x]` to read and `bufs[y]` to write (`x ≠ y`: every step writes a new buffer).
     fn pair(bufs: &mut [Vec<f32>], x: usize, y: usize) -> (&[f32], &mut [f32]) {
         if x < y {
@@ -1540,5 +1576,61 @@ mod tests {
         let mut r = Runner::new(std::sync::Arc::new(p));
         assert!(r.run(&[&[0.0; 7]]).is_err());
         assert!(r.run(&[]).is_err());
+    }
+
+    #[test]
+    fn a_lent_input_gives_the_copied_inputs_outputs_and_comes_back_unchanged() {
+        // Two convolutions and a depthwise one between (each step writes a new buffer).
+        let nodes = vec![
+            node("Conv", &["x", "k1"], "a", &[("pads", ints(&[1, 1, 1, 1]))]),
+            node(
+                "Conv",
+                &["a", "k2"],
+                "b",
+                &[("group", Attr::Int(4)), ("pads", ints(&[1, 1, 1, 1]))],
+            ),
+            node("Conv", &["b", "k3"], "y", &[]),
+        ];
+        let inits = vec![
+            ("k1", f32s(&[4, 3, 3, 3], 1)),
+            ("k2", f32s(&[4, 1, 3, 3], 2)),
+            ("k3", f32s(&[2, 4, 1, 1], 3)),
+        ];
+        let m = model(nodes, inits, &["x"]);
+        let p = std::sync::Arc::new(Plan::new(&m, &[("x", &[1, 3, 9, 9])], &["y", "a"]).unwrap());
+        let x: Vec<f32> = (0..3 * 81)
+            .map(|i| ((i * 37) % 23) as f32 / 7.0 - 1.5)
+            .collect();
+        let mut copied = Runner::new(std::sync::Arc::clone(&p));
+        let want: Vec<Vec<f32>> = copied
+            .run(&[&x])
+            .unwrap()
+            .iter()
+            .map(|v| v.to_vec())
+            .collect();
+        let mut lent = Runner::new(p);
+        for _ in 0..2 {
+            let mut input = x.clone();
+            let got: Vec<Vec<f32>> = lent
+                .run_exchanging(&mut input)
+                .unwrap()
+                .iter()
+                .map(|v| v.to_vec())
+                .collect();
+            let bits = |v: &[Vec<f32>]| v.iter().flatten().map(|f| f.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&got), bits(&want));
+            assert_eq!(input, x, "the lent input comes back as it was");
+        }
+        // A wrong length is an error, the caller's buffer untouched.
+        let mut short = vec![0.5; 7];
+        assert!(lent.run_exchanging(&mut short).is_err());
+        assert_eq!(short, vec![0.5; 7]);
+        // A network whose output is its input: copied, and both still right.
+        let id = model(vec![], vec![], &["x"]);
+        let p = Plan::new(&id, &[("x", &[1, 2])], &["x"]).unwrap();
+        let mut r = Runner::new(std::sync::Arc::new(p));
+        let mut input = vec![1.0, 2.0];
+        assert_eq!(r.run_exchanging(&mut input).unwrap(), vec![&[1.0, 2.0][..]]);
+        assert_eq!(input, vec![1.0, 2.0]);
     }
 }

@@ -363,7 +363,37 @@ impl Net {
         inputs: &[(&[usize], &[f32])],
         expected: &[(&'static str, &[usize])],
     ) -> Result<Vec<Vec<f32>>, NanoError> {
-        // The shapes are the plan's: checked before the run, without copying them.
+        self.check_shapes(expected)?;
+        let data: Vec<&[f32]> = inputs.iter().map(|(_, d)| *d).collect();
+        let outputs = self.runner.run(&data).map_err(|reason| NanoError::Run {
+            key: self.key,
+            path: self.path.clone(),
+            reason,
+        })?;
+        Self::finite(self.key, &self.path, &outputs, expected)
+    }
+
+    /// [`Self::run`] on a network of one input, lent to it instead of copied into it
+    /// ([`nn::Runner::run_exchanging`]): `input` is given back unchanged.
+    fn run_lending(
+        &mut self,
+        input: &mut Vec<f32>,
+        expected: &[(&'static str, &[usize])],
+    ) -> Result<Vec<Vec<f32>>, NanoError> {
+        self.check_shapes(expected)?;
+        let outputs = self
+            .runner
+            .run_exchanging(input)
+            .map_err(|reason| NanoError::Run {
+                key: self.key,
+                path: self.path.clone(),
+                reason,
+            })?;
+        Self::finite(self.key, &self.path, &outputs, expected)
+    }
+
+    /// The plan's output shapes against `expected`, checked before a run.
+    fn check_shapes(&self, expected: &[(&'static str, &[usize])]) -> Result<(), NanoError> {
         let shapes = self.runner.plan().output_shapes();
         if shapes.len() != expected.len() {
             return Err(NanoError::Run {
@@ -383,18 +413,22 @@ impl Net {
                 });
             }
         }
-        let data: Vec<&[f32]> = inputs.iter().map(|(_, d)| *d).collect();
-        let outputs = self.runner.run(&data).map_err(|reason| NanoError::Run {
-            key: self.key,
-            path: self.path.clone(),
-            reason,
-        })?;
+        Ok(())
+    }
+
+    /// Each output copied out, refused when a value is not finite.
+    fn finite(
+        key: &'static str,
+        path: &str,
+        outputs: &[&[f32]],
+        expected: &[(&'static str, &[usize])],
+    ) -> Result<Vec<Vec<f32>>, NanoError> {
         let mut out = Vec::with_capacity(expected.len());
         for (value, &(name, _)) in outputs.iter().zip(expected) {
             if value.iter().any(|v| !v.is_finite()) {
                 return Err(NanoError::NonFinite {
-                    key: self.key,
-                    path: self.path.clone(),
+                    key,
+                    path: path.to_string(),
                     name,
                 });
             }
@@ -710,10 +744,9 @@ impl NanoVerifier {
         } else {
             (search, SEARCH_CELLS)
         };
-        let mut out = net.run(
-            &[(&[1, 3, side, side], &self.input)],
-            &[("output", &[1, CHANNELS, cells, cells])],
-        )?;
+        // The crop is lent to the network, not copied into it (`[1, 3, side, side]`).
+        let mut out =
+            net.run_lending(&mut self.input, &[("output", &[1, CHANNELS, cells, cells])])?;
         Ok(out.swap_remove(0))
     }
 
