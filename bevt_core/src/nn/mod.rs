@@ -631,7 +631,11 @@ impl Builder {
     fn matmul(&mut self, n: &Node) -> Result<(), Error> {
         let bad = |what: String| format!("{}: {what}", who(n));
         let (a, sa) = self.buf(&self.need(n, 0)?)?;
-        let (b, sb) = self.buf(&self.need(n, 1)?)?;
+        let b_val = self.need(n, 1)?;
+        let sb = match &b_val {
+            Val::Const(t) => t.dims.clone(),
+            Val::Buf { shape, .. } => shape.clone(),
+        };
         let gemm = n.op_type == "Gemm";
         if sa.len() < 2 || sb.len() < 2 || (gemm && (sa.len() != 2 || sb.len() != 2)) {
             return Err(bad(format!("operands {sa:?} and {sb:?}")));
@@ -668,7 +672,29 @@ impl Builder {
         } else {
             (ac, 1, ar * ac)
         };
-        let b_strides = if tb { (1, bc, b_step) } else { (bc, 1, b_step) };
+        // A constant right operand read across its rows (`transB`, as the squeeze-and-
+        // excitation layers' weights come from PyTorch) in a product that `ops::gemm`
+        // computes in its own loop (the excitation's one row of pooled values) is transposed
+        // once here, so that the loop reads it along its rows, vectorised, instead of one
+        // strided value at a time: each output the same multiply-adds in the same order.
+        let (b, b_strides) = match &b_val {
+            Val::Const(t) if tb && rb == 2 && ops::computes_itself(m, k, nn) => {
+                let v = t.to_f32();
+                let mut tr = vec![0.0; v.len()];
+                for (j, row) in v.chunks_exact(bc).enumerate() {
+                    for (p, &x) in row.iter().enumerate() {
+                        tr[p * br + j] = x;
+                    }
+                }
+                let slot = self.slot(&[bc, br])?;
+                self.plan.init.push((slot, tr));
+                (slot, (br, 1, b_step))
+            }
+            _ => {
+                let (b, _) = self.buf(&b_val)?;
+                (b, if tb { (1, bc, b_step) } else { (bc, 1, b_step) })
+            }
+        };
         let (alpha, bias) = if gemm {
             let alpha = attr_float(n, "alpha", 1.0)?;
             let beta = attr_float(n, "beta", 1.0)?;
@@ -1245,6 +1271,41 @@ mod tests {
             );
             let d = worst(&got, &want);
             assert!(d < 1e-5, "case {i}: {d}");
+        }
+    }
+
+    /// A constant `transB` operand, transposed at plan time for `ops::gemm`'s own loop, gives
+    /// the bits of the same operand given as an input (read strided), for one row (the
+    /// squeeze-and-excitation layers' shape), for a few rows, and for a product large enough
+    /// for nalgebra (not transposed).
+    #[test]
+    fn a_transposed_constant_gives_the_strided_operands_bits() {
+        for (m, k, n) in [(1, 24, 96), (3, 7, 5), (6, 4, 5), (8, 9, 10)] {
+            let x = f32s(&[m, k], 21).to_f32();
+            let w = f32s(&[n, k], 22);
+            let gemm = |b: &str| {
+                node(
+                    "Gemm",
+                    &["x", b],
+                    "g",
+                    &[("transB", Attr::Int(1)), ("alpha", Attr::Float(0.5))],
+                )
+            };
+            let constant = model(vec![gemm("w")], vec![("w", w.clone())], &["x"]);
+            let input = model(vec![gemm("wi")], vec![], &["x", "wi"]);
+            let a = run(&constant, &[("x", &[m, k], &x)], "g");
+            let wv = w.to_f32();
+            let b = run(&input, &[("x", &[m, k], &x), ("wi", &[n, k], &wv)], "g");
+            let bits = |v: &[f32]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&a), bits(&b), "{m} × {k} by ({n} × {k})ᵀ");
+            let want: Vec<f32> = (0..m * n)
+                .map(|i| {
+                    0.5 * (0..k)
+                        .map(|p| x[i / n * k + p] * wv[i % n * k + p])
+                        .sum::<f32>()
+                })
+                .collect();
+            assert!(worst(&a, &want) < 1e-5, "{m} × {k} by ({n} × {k})ᵀ");
         }
     }
 

@@ -25,7 +25,7 @@ pub(super) fn gemm(
     if m == 0 || n == 0 {
         return;
     }
-    if m <= SMALL || n <= SMALL || k <= SMALL {
+    if computes_itself(m, k, n) {
         // nalgebra computes these itself, and its loop indexes strided (row-major) views
         // out of bounds (a debug assertion in nalgebra 0.34.2); a plain loop instead.
         for (i, row) in c.chunks_exact_mut(n).take(m).enumerate() {
@@ -58,6 +58,12 @@ pub(super) fn gemm(
 /// Largest dimension nalgebra multiplies itself (its `SMALL_DIM`); larger products go to
 /// `matrixmultiply`.
 const SMALL: usize = 5;
+
+/// Whether [`gemm`] computes an `m × k` by `k × n` product in its own loop (a dimension of
+/// at most [`SMALL`]) rather than through nalgebra.
+pub(super) fn computes_itself(m: usize, k: usize, n: usize) -> bool {
+    m <= SMALL || n <= SMALL || k <= SMALL
+}
 
 /// An elementwise function of one input.
 #[derive(Debug, Clone, Copy, PartialEq)]
