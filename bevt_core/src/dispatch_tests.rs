@@ -5,11 +5,10 @@
 //! One exception, by choice: the networks' matrix product fuses its multiply-adds where the
 //! CPU has FMA (every x86-64 CPU with AVX2, every aarch64 CPU), so on x86-64 CPUs without
 //! it the networks' last bits differ (docs/benchmarks.md, "fused multiply-adds").
-//! `nn`'s matrix product also has wide kernels in pulp's safe SIMD types (AVX-512, `x86::V4`,
-//! 8 × 32 outputs in registers; AVX2 + FMA, `x86::V3`, 4 × 16), and the depthwise kernel
-//! SIMD blocks (3 × 3 kernels, and on AVX-512 5 × 5 ones, summed in registers; other
-//! kernels' rows of 3 and 5 taps): on a CPU with either their bits are the ones pinned below
-//! for the product and the depthwise convolutions.
+//! `nn`'s matrix product also has an AVX-512 kernel (pulp's `x86::V4`) for whole blocks of
+//! 16 columns, and the depthwise kernel AVX-512 blocks (3 × 3 and 5 × 5 kernels summed in
+//! registers, other kernels' rows of 3 and 5 taps): on a CPU with AVX-512
+//! their bits are the ones pinned below for the product and the depthwise convolutions.
 //! x86-64 only: other architectures compile the baseline versions alone.
 
 use crate::features::hog::Hog;

@@ -24,8 +24,7 @@
 //! Where each input row goes (its phase and offset: divisions by the strides) is worked out
 //! once per call, not per channel: on 12 × 12 maps those divisions cost more than the
 //! copies. On x86-64 CPUs with AVX-512 the work runs on 16-value blocks (pulp's `x86::V4`,
-//! safe code), on those with AVX2 and FMA on 8-value blocks (`x86::V3`), the wide buffer
-//! padded to whole blocks: for the networks' square kernels (3 × 3
+//! safe code), the wide buffer padded to whole blocks: for the networks' square kernels (3 × 3
 //! and 5 × 5) each block summed over all kernel rows in registers and stored once, for other
 //! kernels row by row; each value is the same multiplies and adds in the same order as in
 //! the other rows, so the same bits.
@@ -148,9 +147,8 @@ pub struct Scratch {
 /// (`channels` planes of `out_h × out_w`), zero padding. Returns `false` (and leaves
 /// `output` alone) when a slice has the wrong length.
 ///
-/// On x86-64 CPUs with AVX-512 the work runs on 16-value blocks, with AVX2 and FMA on 8-value
-/// blocks (safe code through pulp's `x86::V4` and `x86::V3`), each output the same
-/// operations in the same order: the same bits.
+/// On x86-64 CPUs with AVX-512 the work runs on 16-value blocks (safe code through pulp's
+/// `x86::V4`), each output the same operations in the same order: the same bits.
 pub fn depthwise(
     g: &Geometry,
     input: &[f32],
@@ -162,7 +160,7 @@ pub fn depthwise(
     depthwise_rows(g, input, weights, bias, output, scratch, true)
 }
 
-/// [`depthwise`], with the wide SIMD blocks allowed (`wide`, where the CPU has them) or not.
+/// [`depthwise`], with the AVX-512 rows allowed (`wide`, where the CPU has them) or not.
 #[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 + FMA clone, chosen at run time
 fn depthwise_rows(
     g: &Geometry,
@@ -185,13 +183,13 @@ fn depthwise_rows(
     let (sh, sw) = (g.stride_h, g.stride_w);
     let sub = hq * wq;
     // Outputs computed per tap: the wide rows, the last one cut at out_w, rounded up to whole
-    // blocks of `LANES` for the SIMD blocks (the values past the last output are computed
+    // blocks of `LANES` for the AVX-512 rows (the values past the last output are computed
     // from the phases' zero slack and dropped).
     let span = ((g.out_h - 1) * wq + g.out_w).next_multiple_of(LANES);
     scratch.phases.resize(sh * sw * sub + LANES, 0.0);
     scratch.wide.resize(span, 0.0);
     #[cfg(target_arch = "x86_64")]
-    let level = blocks::Level::detect().filter(|_| wide);
+    let v4 = pulp::x86::V4::try_new().filter(|_| wide);
     #[cfg(not(target_arch = "x86_64"))]
     let _ = wide;
     let rows_read = hq * sh;
@@ -278,14 +276,14 @@ fn depthwise_rows(
         let wide = &mut scratch.wide[..span];
         let kernel = &weights[c * taps..(c + 1) * taps];
         let out = &mut output[c * g.out_plane()..(c + 1) * g.out_plane()];
-        // 2. and 3. on AVX-512 or AVX2, for the networks' square kernels: each block of the wide
+        // 2. and 3. on AVX-512, for the networks' square kernels: each block of the wide
         //    output summed over every kernel row in registers, then the valid columns.
         #[cfg(target_arch = "x86_64")]
-        if let Some(level) = level {
+        if let Some(simd) = v4 {
             let phases = &scratch.phases[..];
             let done = match (g.k_h, g.k_w) {
-                (3, 3) => blocks::channel::<3, 9>(level, wide, phases, starts, kernel, bias[c]),
-                (5, 5) => blocks::channel::<5, 25>(level, wide, phases, starts, kernel, bias[c]),
+                (3, 3) => wide16::channel::<3, 9>(simd, wide, phases, starts, kernel, bias[c]),
+                (5, 5) => wide16::channel::<5, 25>(simd, wide, phases, starts, kernel, bias[c]),
                 _ => false,
             };
             if done {
@@ -313,17 +311,17 @@ fn depthwise_rows(
                 }
                 break;
             }
-            // The SIMD blocks' rows where the CPU has them, else the rows below; either way the
+            // The AVX-512 rows where the CPU has them, else the rows below; either way the
             // last kernel row's valid columns are copied out after it (3.).
             #[cfg(target_arch = "x86_64")]
-            let done = match (level, g.k_w) {
-                (Some(level), 3) => {
-                    blocks::row(level, wide, [src(0), src(1), src(2)], [w[0], w[1], w[2]]);
+            let done = match (v4, g.k_w) {
+                (Some(simd), 3) => {
+                    wide16::row3(simd, wide, [src(0), src(1), src(2)], [w[0], w[1], w[2]]);
                     true
                 }
-                (Some(level), 5) => {
+                (Some(simd), 5) => {
                     let s = [src(0), src(1), src(2), src(3), src(4)];
-                    blocks::row(level, wide, s, [w[0], w[1], w[2], w[3], w[4]]);
+                    wide16::row5(simd, wide, s, [w[0], w[1], w[2], w[3], w[4]]);
                     true
                 }
                 _ => false,
@@ -359,56 +357,33 @@ fn depthwise_rows(
     true
 }
 
-/// Block of the wide buffer's length: it holds whole blocks of 16 values (and so of 8) for
-/// [`blocks`].
+/// Block of the wide buffer's length: it holds whole blocks of 16 values for [`wide16`].
 const LANES: usize = 16;
 
-/// [`row3`] and [`row5`], and a square kernel's whole channel, on the registers of a pulp
-/// [`Simd`](pulp::Simd) (AVX-512's 16 lanes, `x86::V4`, or AVX2's 8, `x86::V3`, detected at run
-/// time), in safe code: each value the same multiplies and adds in the same order, so the
+/// [`row3`] and [`row5`] on 16-value AVX-512 blocks, in safe code through pulp's `x86::V4`
+/// (detected at run time): each value the same multiplies and adds in the same order, so the
 /// same bits. The slices hold whole blocks (the wide buffer is padded to [`LANES`]).
 #[cfg(target_arch = "x86_64")]
-mod blocks {
-    use pulp::x86::{V3, V4};
-    use pulp::Simd;
+mod wide16 {
+    use super::LANES;
+    use pulp::x86::V4;
+    use pulp::{f32x16, Simd};
 
-    /// The wide SIMD level of this CPU, if it has one.
-    #[derive(Debug, Clone, Copy)]
-    pub(super) enum Level {
-        V4(V4),
-        V3(V3),
-    }
-
-    impl Level {
-        /// AVX-512 where the CPU has it, else AVX2 + FMA, else none.
-        pub(super) fn detect() -> Option<Self> {
-            V4::try_new()
-                .map(Self::V4)
-                .or_else(|| V3::try_new().map(Self::V3))
-        }
-    }
-
-    /// Block `i` of `s` (`S::F32_LANES` values).
+    /// The 16 values of block `i` of `s`.
     #[inline(always)]
-    fn block<S: Simd>(s: &[f32], i: usize) -> S::f32s {
-        let l = S::F32_LANES;
-        S::as_simd_f32s(&s[i * l..(i + 1) * l]).0[0]
-    }
-
-    /// Stores `v` into the block `o` (`S::F32_LANES` values).
-    #[inline(always)]
-    fn store<S: Simd>(o: &mut [f32], v: S::f32s) {
-        S::as_mut_simd_f32s(o).0[0] = v;
+    fn block(s: &[f32], i: usize) -> f32x16 {
+        let (arrays, _) = pulp::as_arrays::<LANES, f32>(&s[i * LANES..(i + 1) * LANES]);
+        pulp::cast(arrays[0])
     }
 
     /// One channel's whole wide output for a `K × K` kernel (`T` = `K²` taps starting at
     /// `starts` in `phases`): per block, from the bias, `o + (((w₀·a + w₁·b) + …) + w_{K−1}·z)`
-    /// kernel row after kernel row, as [`super::row3`] and [`super::row5`] compute it across
-    /// passes over the buffer (the same bits), but summed in registers: one store per block
-    /// instead of a load and a store per kernel row, and no pass filling the bias. `false`
-    /// (nothing done) when the sizes do not match.
+    /// kernel row after kernel row, as [`row3`] and [`row5`] compute it across passes over
+    /// the buffer (the same bits), but summed in registers: one store per block instead of
+    /// a load and a store per kernel row, and no pass filling the bias. `false` (nothing
+    /// done) when the sizes do not match.
     pub(super) fn channel<const K: usize, const T: usize>(
-        level: Level,
+        simd: V4,
         wide: &mut [f32],
         phases: &[f32],
         starts: &[usize],
@@ -416,11 +391,7 @@ mod blocks {
         bias: f32,
     ) -> bool {
         let span = wide.len();
-        // AVX2's 16 registers hold a 3 × 3 kernel's weights beside the sums; a 5 × 5 kernel's
-        // 25 would be reloaded per block, more loads than the rows' passes take.
-        let fits = matches!(level, Level::V4(_)) || K <= 3;
-        if !fits
-            || K * K != T
+        if K * K != T
             || kernel.len() != T
             || starts.len() != T
             || starts.iter().any(|&s| s + span > phases.len())
@@ -428,71 +399,60 @@ mod blocks {
             return false;
         }
         let src: [&[f32]; T] = std::array::from_fn(|t| &phases[starts[t]..starts[t] + span]);
-        match level {
-            Level::V4(simd) => simd.vectorize(
-                #[inline(always)]
-                || channel_on::<V4, K, T>(simd, wide, &src, kernel, bias),
-            ),
-            Level::V3(simd) => simd.vectorize(
-                #[inline(always)]
-                || channel_on::<V3, K, T>(simd, wide, &src, kernel, bias),
-            ),
-        }
+        simd.vectorize(
+            #[inline(always)]
+            || {
+                let w: [f32x16; T] = std::array::from_fn(|t| simd.splat_f32s(kernel[t]));
+                for (i, o) in wide.chunks_exact_mut(LANES).enumerate() {
+                    let mut acc = simd.splat_f32s(bias);
+                    for ky in 0..K {
+                        let r = ky * K;
+                        let mut t = simd.mul_f32s(w[r], block(src[r], i));
+                        for kx in 1..K {
+                            t = simd.add_f32s(t, simd.mul_f32s(w[r + kx], block(src[r + kx], i)));
+                        }
+                        acc = simd.add_f32s(acc, t);
+                    }
+                    o.copy_from_slice(&pulp::cast::<f32x16, [f32; LANES]>(acc));
+                }
+            },
+        );
         true
     }
 
-    /// [`channel`] on `S`'s registers.
-    #[inline(always)]
-    fn channel_on<S: Simd, const K: usize, const T: usize>(
-        simd: S,
-        wide: &mut [f32],
-        src: &[&[f32]; T],
-        kernel: &[f32],
-        bias: f32,
-    ) {
-        let w: [S::f32s; T] = std::array::from_fn(|t| simd.splat_f32s(kernel[t]));
-        for (i, o) in wide.chunks_exact_mut(S::F32_LANES).enumerate() {
-            let mut acc = simd.splat_f32s(bias);
-            for ky in 0..K {
-                let r = ky * K;
-                let mut t = simd.mul_f32s(w[r], block::<S>(src[r], i));
-                for kx in 1..K {
-                    let v = simd.mul_f32s(w[r + kx], block::<S>(src[r + kx], i));
-                    t = simd.add_f32s(t, v);
+    /// [`super::row3`]: `o + ((w₀·a + w₁·b) + w₂·c)` per value.
+    pub(super) fn row3(simd: V4, wide: &mut [f32], s: [&[f32]; 3], w: [f32; 3]) {
+        simd.vectorize(
+            #[inline(always)]
+            || {
+                let w = w.map(|w| simd.splat_f32s(w));
+                for (i, o) in wide.chunks_exact_mut(LANES).enumerate() {
+                    let t0 = simd.mul_f32s(w[0], block(s[0], i));
+                    let t = simd.add_f32s(t0, simd.mul_f32s(w[1], block(s[1], i)));
+                    let t = simd.add_f32s(t, simd.mul_f32s(w[2], block(s[2], i)));
+                    let v = simd.add_f32s(block(o, 0), t);
+                    o.copy_from_slice(&pulp::cast::<f32x16, [f32; LANES]>(v));
                 }
-                acc = simd.add_f32s(acc, t);
-            }
-            store::<S>(o, acc);
-        }
+            },
+        );
     }
 
-    /// [`super::row3`] (`N` = 3) and [`super::row5`] (`N` = 5):
-    /// `o + (((w₀·a + w₁·b) + …) + w_{N−1}·z)` per value.
-    pub(super) fn row<const N: usize>(level: Level, wide: &mut [f32], s: [&[f32]; N], w: [f32; N]) {
-        match level {
-            Level::V4(simd) => simd.vectorize(
-                #[inline(always)]
-                || row_on::<V4, N>(simd, wide, s, w),
-            ),
-            Level::V3(simd) => simd.vectorize(
-                #[inline(always)]
-                || row_on::<V3, N>(simd, wide, s, w),
-            ),
-        }
-    }
-
-    /// [`row`] on `S`'s registers.
-    #[inline(always)]
-    fn row_on<S: Simd, const N: usize>(simd: S, wide: &mut [f32], s: [&[f32]; N], w: [f32; N]) {
-        let w = w.map(|w| simd.splat_f32s(w));
-        for (i, o) in wide.chunks_exact_mut(S::F32_LANES).enumerate() {
-            let mut t = simd.mul_f32s(w[0], block::<S>(s[0], i));
-            for k in 1..N {
-                t = simd.add_f32s(t, simd.mul_f32s(w[k], block::<S>(s[k], i)));
-            }
-            let v = simd.add_f32s(block::<S>(o, 0), t);
-            store::<S>(o, v);
-        }
+    /// [`super::row5`]: `o + ((((w₀·a + w₁·b) + w₂·c) + w₃·d) + w₄·e)` per value.
+    pub(super) fn row5(simd: V4, wide: &mut [f32], s: [&[f32]; 5], w: [f32; 5]) {
+        simd.vectorize(
+            #[inline(always)]
+            || {
+                let w = w.map(|w| simd.splat_f32s(w));
+                for (i, o) in wide.chunks_exact_mut(LANES).enumerate() {
+                    let mut t = simd.mul_f32s(w[0], block(s[0], i));
+                    for k in 1..5 {
+                        t = simd.add_f32s(t, simd.mul_f32s(w[k], block(s[k], i)));
+                    }
+                    let v = simd.add_f32s(block(o, 0), t);
+                    o.copy_from_slice(&pulp::cast::<f32x16, [f32; LANES]>(v));
+                }
+            },
+        );
     }
 }
 
@@ -668,14 +628,14 @@ mod tests {
         assert!(cases > 150, "{cases} cases");
     }
 
-    /// The SIMD blocks (AVX-512 or AVX2, where the CPU has them) against the autovectorised
-    /// rows: the same bits on NanoTrack's shapes and ragged ones, one scratch reused across
-    /// shapes (as the networks do). On a CPU with neither both runs take the same rows.
+    /// The AVX-512 rows (where the CPU has them) against the AVX2 / baseline rows: the same
+    /// bits on NanoTrack's shapes and ragged ones, one scratch reused across shapes (as the
+    /// networks do). On a CPU without AVX-512 both runs take the same rows.
     #[test]
     fn the_wide_rows_give_the_narrow_rows_bits() {
         let (mut wide, mut narrow) = (Scratch::default(), Scratch::default());
         // (channels, side, kernel height, kernel width, stride): the square kernels take the
-        // in-register blocks, the others the SIMD rows of 3 and 5 taps.
+        // in-register blocks, the others the AVX-512 rows of 3 and 5 taps.
         for (case, &(c, n, kh, k, s)) in [
             (3usize, 96usize, 3usize, 3usize, 2usize),
             (5, 24, 3, 3, 1),
