@@ -177,9 +177,9 @@ done
 # stay out; the head test (planning and running the head three times) took 4 s and runs again. They run natively in `cargo test --workspace`;
 # on aarch64 the network code is exercised by the eval below, whose default configuration
 # runs the NanoTrack drift check every 15 confident frames and whose boxes and states must
-# match. Also left out: the lost-state search test of `redetection.verifier_filter_hint`
-# (no network, a mock verifier, but about 50 lost frames of 960×540 with 8 filter windows
-# each: 5 s natively), the test of `redetection.filter_search` (a mock verifier, two runs of
+# match. Also left out: the lost-state search tests of `redetection.verifier_filter_hint`
+# and `redetection.verifier_proposals` (no network, a mock verifier, but about 50 lost
+# frames of 960×540 with 8 filter windows each: 5 s natively), the test of `redetection.filter_search` (a mock verifier, two runs of
 # 90 frames of 960×540, up to 48 of them lost: 5 s natively), and the camera motion tests (no network either, but six runs of 50 and
 # three of 60 shaken 480×320 frames with lost stretches: the first about 110 s of the qemu step beside the evals,
 # 2026-11-28, against a thin 20-minute CI margin); the stage's own unit tests (`motion::tests`:
@@ -201,6 +201,7 @@ skipped=(
   tracker::tests::the_learned_box_head_answers_drift_checks_only_on_the_visible_target
   tracker::tests::the_verifier_confirms_unconfident_frames_on_the_target
   tracker::tests::the_verifier_looks_first_where_the_frozen_filter_points
+  tracker::tests::the_verifier_looks_first_where_the_template_match_points
   tracker::tests::with_a_verifier_the_filter_sweeps_the_frame_only_when_asked
 )
 listed=$("${qemu[@]}" "$core_tests" --list --format terse) || fail "listing bevt_core's unit tests under qemu"

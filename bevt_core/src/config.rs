@@ -448,6 +448,11 @@ pub struct RedetectionConfig {
     /// Off by default: it re-acquires sooner with fewer passes, but the states flag the
     /// failures that remain less precisely (docs/states.md).
     pub verifier_filter_hint: bool,
+    /// On a lost frame the verifier's first passes (after the filter's hint, if taken) go to
+    /// the best whole-frame template-match proposals ([`crate::redetect::propose`], at the
+    /// scale of the loss) before the tile walk: a cheap prior over the whole frame orders
+    /// the expensive search. 0 = the tile walk alone.
+    pub verifier_proposals: usize,
     /// Whether the frozen filter sweeps the frame (whole-frame proposals and the tile walk,
     /// within `windows_per_frame`) while lost, or only follows the last position and its
     /// candidate: `auto` sweeps only when no verifier searches (`verifier: none`) or the
@@ -513,6 +518,7 @@ impl Default for RedetectionConfig {
             verifier_threshold: 5.0,
             verifier_filter_check: false,
             verifier_filter_hint: false,
+            verifier_proposals: 0,
             filter_search: FilterSearch::Auto,
         }
     }
@@ -963,6 +969,12 @@ impl TrackerConfig {
             r.proposals,
         )?;
         int_key("redetection.verifier_windows", r.verifier_windows)?;
+        int_key("redetection.verifier_proposals", r.verifier_proposals)?;
+        cross_key(
+            r.verifier_proposals <= r.verifier_windows,
+            "redetection.verifier_proposals",
+            r.verifier_proposals,
+        )?;
         keys::spec("redetection.verifier_scales").check_list(&r.verifier_scales)?;
         float_key("redetection.verifier_threshold", r.verifier_threshold)?;
         let b = &self.box_refine;
@@ -1361,6 +1373,13 @@ mod tests {
             }),
             ("redetection.proposals", |c| {
                 c.redetection.proposals = c.redetection.windows_per_frame + 1
+            }),
+            ("redetection.verifier_proposals", |c| {
+                c.redetection.verifier_proposals = 17
+            }),
+            ("redetection.verifier_proposals", |c| {
+                c.redetection.verifier_windows = 2;
+                c.redetection.verifier_proposals = 3
             }),
             ("redetection.reacquire_frames", |c| {
                 c.redetection.reacquire_frames = 0

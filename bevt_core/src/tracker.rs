@@ -1702,6 +1702,69 @@ mod tests {
         assert!(with <= BACK + 2 + confirm, "re-acquired at {with}");
     }
 
+    /// `redetection.verifier_proposals`: in the scene of the filter-hint test above (the
+    /// target back 57 px from where it was lost, where the verifier's tile walk reaches it
+    /// only after the scene's end), the verifier's first passes on the whole-frame
+    /// template-match proposals find it as soon as the track is lost: the cheap prior
+    /// orders the expensive search. Only the verifier can take the track back
+    /// (`reacquire_threshold` 1), with the same bar and confirmation, within
+    /// `verifier_windows` passes on every lost frame.
+    #[test]
+    fn the_verifier_looks_first_where_the_template_match_points() {
+        const HIDE: usize = 15;
+        const BACK: usize = 25;
+        let seq = SynthParams {
+            width: 960,
+            height: 540,
+            target: (28.0, 24.0),
+            frames: 45,
+            hidden: Some((HIDE, BACK)),
+            reappear_offset: (45.0, 35.0),
+            ..SynthParams::default()
+        };
+        let run = |proposals: usize| {
+            let mut cfg = TrackerConfig::default();
+            cfg.redetection.reacquire_threshold = 1.0;
+            cfg.redetection.verifier_proposals = proposals;
+            let windows = cfg.redetection.verifier_windows;
+            let truth = Arc::new(Mutex::new(None));
+            let calls = Arc::new(AtomicUsize::new(0));
+            let oracle = Oracle {
+                truth: Arc::clone(&truth),
+                calls: Arc::clone(&calls),
+            };
+            let mut t = started_with(&seq, &cfg, Some(Box::new(oracle)));
+            for i in 1..seq.frames {
+                let f = seq.frame(i);
+                *truth.lock().unwrap() = f.visible.then(|| f.truth.center());
+                let frame =
+                    Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+                let before = calls.load(Ordering::Relaxed);
+                let o = t.update(&frame).unwrap();
+                let passes = calls.load(Ordering::Relaxed) - before;
+                if o.state == TrackState::Lost {
+                    assert!(passes <= windows, "frame {i}: {passes} passes");
+                }
+                if o.state == TrackState::Reacquired {
+                    assert!(i >= BACK, "re-acquired at {i} while hidden");
+                    let e = o.bbox.center().distance(&f.truth.center());
+                    assert!(e < 8.0, "frame {i}: centre error {e}");
+                    return Some(i);
+                }
+            }
+            None
+        };
+        let with = run(2).expect("never re-acquired with the proposals");
+        let without = run(0);
+        println!("re-acquired at {with} with 2 proposals, at {without:?} without");
+        assert!(
+            without.is_none_or(|w| with < w),
+            "{with} with the proposals, {without:?} without"
+        );
+        let confirm = TrackerConfig::default().redetection.reacquire_frames;
+        assert!(with <= BACK + 2 + confirm + 2, "re-acquired at {with}");
+    }
+
     /// `redetection.filter_search`: with a verifier searching the lost frames (`auto`) the
     /// frozen filter only follows the last position and its candidate, so a target that
     /// re-enters far away is the verifier's to find; `always` lets the filter's own sweep

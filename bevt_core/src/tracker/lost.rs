@@ -23,7 +23,7 @@ use crate::error::TrackError;
 use crate::geometry::Point2;
 use crate::image::Frame;
 use crate::redetect::{
-    candidate_threshold, context_side, propose, Appearance, Candidate, CandidateTracker,
+    candidate_threshold, context_side, propose, Appearance, Candidate, CandidateTracker, Proposal,
     ProposalScratch, Scored, SearchPlan, Verifier, VerifierHit,
 };
 use crate::track_state::TrackState;
@@ -278,7 +278,8 @@ fn hit_scale(st: &State, hit: &VerifierHit) -> f32 {
 /// or spend `verifier_windows` on the whole-frame tiles, the first of them (with
 /// `verifier_filter_hint`) on `hint`, the frozen filter's most confident window of the
 /// frame (position and absolute scale): the cheap witness points, the learned one looks
-/// there before it walks on. The candidate once it has been above
+/// there before it walks on; then (with `verifier_proposals`) on `proposals`, the frame's
+/// best template-match proposals, at the scale of the loss. The candidate once it has been above
 /// `verifier_threshold` for `reacquire_frames` frames in a row and (with
 /// `verifier_filter_check`) the frozen filter makes it a candidate too. A candidate the
 /// filter refuses is dropped (it must be confirmed anew).
@@ -288,6 +289,7 @@ fn verify(
     spec: &TrackerSpec,
     v: &mut dyn Verifier,
     hint: (Point2, f32),
+    proposals: &[Proposal],
 ) -> Result<Option<Candidate>, TrackError> {
     let r = &spec.config.redetection;
     let thr = r.verifier_threshold;
@@ -321,9 +323,15 @@ fn verify(
             passes.saturating_sub(1)
         };
     }
-    let mut hint = r.verifier_filter_hint.then_some(hint);
+    let at_loss = st.lost.scale_at_loss;
+    let mut firsts = r.verifier_filter_hint.then_some(hint).into_iter().chain(
+        proposals
+            .iter()
+            .take(r.verifier_proposals)
+            .map(|p| (p.center, at_loss)),
+    );
     for _ in 0..passes {
-        let (center, scale) = match hint.take() {
+        let (center, scale) = match firsts.next() {
             Some(h) => h,
             None => {
                 let Some(w) = st.lost.vplan.next_window() else {
@@ -459,14 +467,21 @@ pub(super) fn search(
     } else {
         0
     };
+    // The verifier's share (`verifier_proposals`) comes from the same match, when it will
+    // search this frame: computed once for both.
+    let verifier_wanted = if verifier.is_some() && p.enabled {
+        p.verifier_proposals
+    } else {
+        0
+    };
     let proposals = propose(
         frame,
         &st.lost.appearance,
         side,
-        wanted,
+        wanted.max(verifier_wanted),
         &mut st.lost.scratch,
     );
-    for pr in proposals {
+    for pr in proposals.iter().take(wanted).copied() {
         let scale = st.lost.scale_at_loss;
         let (pos, conf, peak) = evaluate(st, frame, pr.center, scale, spec)?;
         best.offer((pos, conf, peak), scale);
@@ -485,12 +500,11 @@ pub(super) fn search(
     let accepted = match st.lost.candidates.end_frame(p.reacquire_frames) {
         Some(c) => Some(c),
         None => match verifier {
-            Some(v) if p.enabled => {
-                verify(st, frame, spec, v, (best.pos, best.scale))?.map(|c| Candidate {
+            Some(v) if p.enabled => verify(st, frame, spec, v, (best.pos, best.scale), &proposals)?
+                .map(|c| Candidate {
                     confidence: best.confidence.max(st.lost.threshold),
                     ..c
-                })
-            }
+                }),
             _ => None,
         },
     };
