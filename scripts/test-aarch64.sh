@@ -3,8 +3,15 @@
 #   1. bevt_core's unit tests, cross-built for aarch64-unknown-linux-gnu, run under qemu;
 #   2. `bevt_node --help` and `bevt --help` of the cross-built programs;
 #   3. `bevt eval` on one dev sequence (default wakeboard7) by the aarch64 `bevt` under qemu
-#      and by the native x86_64 `bevt`; every box must agree within TOLERANCE_PX pixels
-#      (each of x, y, w, h). They are not bit-identical: floating-point results differ by
+#      and by the native x86_64 `bevt`; the track states must be equal and every box must
+#      agree within TOLERANCE_PX pixels (each of x, y, w, h).
+#   With AARCH64_PROGRAMS=0 (what .ci/run uses) 2. is left out and 3. is run by bevt_core's
+#   example `track_sequence` (the default tracker on the sequence's JPEG frames, the same
+#   output formats) instead of `bevt eval`: only bevt_core and its 70-odd crates are
+#   cross-built, not the node's 230 (RustDDS, tokio, image, ...): 122 against 340 CPU-s on
+#   2026-12-02 (docs/testing.md#ci). The tracker's arithmetic on aarch64, which is what
+#   differs between the architectures, is tested the same way; the programs' aarch64 build
+#   is then scripts/build-aarch64.sh's and scripts/build-deb.sh's, not CI's. They are not bit-identical: floating-point results differ by
 #      ulps between the architectures (glibc's libm, rustfft's NEON and x86 paths), and the
 #      tracker feeds each frame's box into the next. wakeboard7 on 2026-11-25: boxes equal
 #      for frames 1-5, largest difference 1.22 px (docs/deploy.md#aarch64-jetson). A target
@@ -28,6 +35,9 @@
 #   AARCH64_FEATURES cargo features of bevt_node for the cross build (default `jazzy`: no DDS
 #                    Security, so no arm64 OpenSSL to install; the tracker is the same code)
 #   QEMU_TIMEOUT_S   time limit of each emulated run (the unit tests, the eval; default 900)
+#   AARCH64_PROGRAMS 1 (default): cross-build and check the programs as above; 0: bevt_core
+#                    only (its unit tests and the example); the same value for --build and
+#                    --check
 #
 # Installs what is missing (rustup target, gcc-aarch64-linux-gnu, qemu-user). Nothing is
 # skipped: a missing tool, dataset or sequence is an error (exit 1), as is any mismatch.
@@ -54,6 +64,11 @@ dataset=${BEVT_DATASET:-../shared/datasets/uav123_10fps_dev}
 tolerance=${TOLERANCE_PX:-3}
 features=${AARCH64_FEATURES:-jazzy}
 QEMU_TIMEOUT_S=${QEMU_TIMEOUT_S:-900}
+programs=${AARCH64_PROGRAMS:-1}
+case "$programs" in
+  0 | 1) ;;
+  *) echo "test-aarch64: AARCH64_PROGRAMS must be 0 or 1, not '$programs'" >&2; exit 2 ;;
+esac
 
 fail() { echo "test-aarch64: FAILED: $*" >&2; exit 1; }
 step() { printf 'test-aarch64: %s (%ss)\n' "$1" "$SECONDS" >&2; }
@@ -108,6 +123,10 @@ if [ "$mode" != check ]; then
   [ -n "$node_features" ] || fail "AARCH64_FEATURES is empty (name a ROS distro feature: jazzy or humble)"
   selection=(--locked --target "$triple" -p bevt_core -p bevt_node --no-default-features
     --features "bevt_core/default,$node_features")
+  if [ "$programs" = 0 ]; then
+    # bevt_core alone, with its default features (its example for 3. is built below).
+    selection=(--locked --target "$triple" -p bevt_core)
+  fi
   # The cross build's own settings, for its two cargo commands only (the native build below
   # must keep the test command's profile, or it would all be compiled again): its own target
   # dir; no line tables for our crates (the dependencies have none in dev already), which
@@ -131,25 +150,36 @@ if [ "$mode" != check ]; then
   "${cross_env[@]}" cargo test --no-run "${selection[@]}" --lib \
     --message-format=json-render-diagnostics >"$work/test-build.json" ||
     fail "cross build of the unit tests"
-  core_tests=$(python3 - "$work/test-build.json" <<'EOF'
+  # The executable of target NAME from cargo's messages, the test harness or not (KIND).
+  artifact() {
+    python3 - "$work/test-build.json" "$1" "$2" <<'EOF'
 import json
 import sys
 
+name, test = sys.argv[2], sys.argv[3] == "test"
 for line in open(sys.argv[1]):
     try:
         msg = json.loads(line)
     except ValueError:
         continue
     if (msg.get("reason") == "compiler-artifact" and msg.get("executable")
-            and msg["target"]["name"] == "bevt_core" and msg["profile"]["test"]):
+            and msg["target"]["name"] == name and msg["profile"]["test"] == test):
         print(msg["executable"])
 EOF
-  )
+  }
+  core_tests=$(artifact bevt_core test)
   [ -n "$core_tests" ] && [ -x "$core_tests" ] || fail "no bevt_core test executable in cargo's output"
 
-  step "build bevt_node and bevt for $triple"
-  "${cross_env[@]}" cargo build "${selection[@]}" --bin bevt_node --bin bevt ||
-    fail "cross build of the programs"
+  if [ "$programs" = 1 ]; then
+    step "build bevt_node and bevt for $triple"
+    "${cross_env[@]}" cargo build "${selection[@]}" --bin bevt_node --bin bevt ||
+      fail "cross build of the programs"
+  else
+    # A program, not `cargo test --example` (which would build it as a test harness).
+    step "build bevt_core's example track_sequence for $triple"
+    "${cross_env[@]}" cargo build "${selection[@]}" --example track_sequence ||
+      fail "cross build of the example"
+  fi
   # Written last: a --check finds it only after a complete build.
   printf '%s\n' "$core_tests" >"$core_tests_file"
   if [ "$mode" = build ]; then
@@ -161,8 +191,14 @@ fi
 core_tests=$(cat "$core_tests_file" 2>/dev/null) || fail "nothing built in $cross_dir (run --build first)"
 [ -x "$core_tests" ] || fail "$core_tests (from $core_tests_file) is missing"
 file -b "$core_tests" | grep -q 'ARM aarch64' || fail "$core_tests is not an aarch64 program"
-for prog in bevt_node bevt; do
-  file -b "$arm_bin/$prog" | grep -q 'ARM aarch64' || fail "$arm_bin/$prog is not an aarch64 program"
+if [ "$programs" = 1 ]; then
+  arm_progs=("$arm_bin/bevt_node" "$arm_bin/bevt")
+else
+  arm_progs=("$arm_bin/examples/track_sequence")
+fi
+for prog in "${arm_progs[@]}"; do
+  file -b "$prog" | grep -q 'ARM aarch64' ||
+    fail "$prog is not an aarch64 program (built with another AARCH64_PROGRAMS than $programs?)"
 done
 
 # Left out under emulation, by name (listed in the output): the tracker tests that run the
@@ -213,11 +249,15 @@ for t in "${skipped[@]}"; do
   skip_args+=(--skip "$t")
 done
 
-step "--help of the aarch64 programs under qemu"
-for prog in bevt_node bevt; do
-  help=$("${qemu[@]}" "$arm_bin/$prog" --help) || fail "$prog --help under qemu exited with $?"
-  grep -q '^Usage:' <<<"$help" || fail "$prog --help under qemu printed no usage line"
-done
+if [ "$programs" = 1 ]; then
+  step "--help of the aarch64 programs under qemu"
+  for prog in bevt_node bevt; do
+    help=$("${qemu[@]}" "$arm_bin/$prog" --help) || fail "$prog --help under qemu exited with $?"
+    grep -q '^Usage:' <<<"$help" || fail "$prog --help under qemu printed no usage line"
+  done
+else
+  echo "test-aarch64: AARCH64_PROGRAMS=0: bevt_node and bevt are not built for aarch64 in this run; bevt_core's example track_sequence tracks the sequence" >&2
+fi
 
 # The native `bevt` as `cargo test --workspace` (README's test command) builds it for the
 # integration tests, in that command's environment (the caller's CARGO_INCREMENTAL, not the 0
@@ -228,6 +268,8 @@ step "native bevt (x86_64), as the test command builds it"
 "${native_incremental[@]}" cargo test --locked --workspace --no-run -q || fail "native build"
 native_bin="$target_dir/debug"
 [ -x "$native_bin/bevt" ] || fail "no native bevt at $native_bin/bevt"
+[ "$programs" = 1 ] || [ -x "$native_bin/examples/track_sequence" ] ||
+  fail "no native track_sequence in $native_bin/examples (cargo test builds the examples)"
 
 # The unit tests beside the evals; their output is printed once both are done.
 step "bevt_core unit tests under ${qemu[*]}, beside the evals"
@@ -238,12 +280,50 @@ step "bevt_core unit tests under ${qemu[*]}, beside the evals"
   >"$work/unit.log" 2>&1 &
 unit_pid=$!
 
-step "bevt eval --sequences $sequence: x86_64, then aarch64 under qemu"
-"$native_bin/bevt" eval --dataset "$dataset" --sequences "$sequence" --out "$work/x86_64" \
-  >"$work/x86_64.log" 2>&1 || { cat "$work/x86_64.log" >&2; fail "native bevt eval"; }
-timeout "$QEMU_TIMEOUT_S" "${qemu[@]}" "$arm_bin/bevt" eval --dataset "$dataset" \
-  --sequences "$sequence" --out "$work/aarch64" >"$work/aarch64.log" 2>&1 ||
-  { rc=$?; cat "$work/aarch64.log" >&2; fail "aarch64 bevt eval under qemu (exit $rc)"; }
+if [ "$programs" = 1 ]; then
+  step "bevt eval --sequences $sequence: x86_64, then aarch64 under qemu"
+  "$native_bin/bevt" eval --dataset "$dataset" --sequences "$sequence" --out "$work/x86_64" \
+    >"$work/x86_64.log" 2>&1 || { cat "$work/x86_64.log" >&2; fail "native bevt eval"; }
+  timeout "$QEMU_TIMEOUT_S" "${qemu[@]}" "$arm_bin/bevt" eval --dataset "$dataset" \
+    --sequences "$sequence" --out "$work/aarch64" >"$work/aarch64.log" 2>&1 ||
+    { rc=$?; cat "$work/aarch64.log" >&2; fail "aarch64 bevt eval under qemu (exit $rc)"; }
+else
+  # The sequence's first box and frames from the dataset's manifest, as `bevt eval` reads
+  # them (UAV123 layout: img_dir/<frame number, nz digits>.<ext>, start_frame..end_frame).
+  python3 - "$dataset" "$sequence" >"$work/args" <<'EOF' ||
+import json
+import os
+import re
+import sys
+
+root, name = sys.argv[1], sys.argv[2]
+with open(os.path.join(root, "sequences.json")) as f:
+    seqs = [s for s in json.load(f)["sequences"] if s["name"] == name]
+if len(seqs) != 1:
+    sys.exit(f"{len(seqs)} sequences named {name} in sequences.json")
+s = seqs[0]
+with open(os.path.join(root, s["anno"])) as f:
+    first = [v for v in re.split(r"[,\s]+", f.readline().strip()) if v]
+if len(first) != 4:
+    sys.exit(f"{s['anno']}: the first row is not x,y,w,h")
+print(",".join(first))
+nz, ext = s.get("nz", 6), s.get("ext", "jpg")
+for n in range(s.get("start_frame", 1), s["end_frame"] + 1):
+    p = os.path.join(root, s["img_dir"], f"{n:0{nz}d}.{ext}")
+    if not os.path.isfile(p):
+        sys.exit(f"missing frame {p}")
+    print(p)
+EOF
+    fail "cannot resolve $sequence in $dataset/sequences.json"
+  mapfile -t seq_args <"$work/args"
+  mkdir -p "$work/x86_64" "$work/aarch64"
+  step "track_sequence $sequence ($((${#seq_args[@]} - 1)) frames): x86_64, then aarch64 under qemu"
+  "$native_bin/examples/track_sequence" "$work/x86_64/$sequence" "${seq_args[@]}" \
+    >"$work/x86_64.log" 2>&1 || { cat "$work/x86_64.log" >&2; fail "native track_sequence"; }
+  timeout "$QEMU_TIMEOUT_S" "${qemu[@]}" "$arm_bin/examples/track_sequence" \
+    "$work/aarch64/$sequence" "${seq_args[@]}" >"$work/aarch64.log" 2>&1 ||
+    { rc=$?; cat "$work/aarch64.log" >&2; fail "aarch64 track_sequence under qemu (exit $rc)"; }
+fi
 
 step "the unit tests under qemu"
 rc=0
