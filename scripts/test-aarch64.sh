@@ -138,7 +138,11 @@ if [ "$mode" != check ]; then
   cross_env=(env CARGO_TARGET_DIR="$cross_dir" CARGO_PROFILE_DEV_DEBUG=false
     CARGO_PROFILE_DEV_OPT_LEVEL=0)
 
-  step "build bevt_core's unit tests for $triple (bevt_node features: $features)"
+  if [ "$programs" = 1 ]; then
+    step "build bevt_core's unit tests for $triple (bevt_node features: $features)"
+  else
+    step "build bevt_core's unit tests for $triple (bevt_core alone)"
+  fi
   rm -f "$core_tests_file"
   # `--lib` of both packages also builds bevt_node's unit-test harness, which is not run here
   # (its tests run natively in `cargo test --workspace`): naming bevt_node is what keeps this
@@ -272,7 +276,7 @@ native_bin="$target_dir/debug"
   fail "no native track_sequence in $native_bin/examples (cargo test builds the examples)"
 
 # The unit tests beside the evals; their output is printed once both are done.
-step "bevt_core unit tests under ${qemu[*]}, beside the evals"
+step "bevt_core unit tests under ${qemu[*]}, beside the sequence's two runs"
 # Run from the package's folder, as `cargo test` would. A time limit, so that a hang (e.g.
 # a glibc mismatch, scripts/build-aarch64.sh) fails the step instead of stalling CI: about
 # 25x the time the tests take (docs/testing.md#ci).
