@@ -1633,59 +1633,66 @@ mod tests {
         );
     }
 
-    /// `redetection.verifier_filter_hint`: a target that comes back beside where it was lost
-    /// (57 px: outside the verifier's tile there, inside the filter's window), in a frame the
-    /// verifier's tiles take many lost frames to walk, is found by the verifier as soon as
-    /// the frozen filter's windows point at it. The filter itself may
-    /// not take the track back here (`reacquire_threshold` 1, which no confidence reaches),
-    /// so every re-acquisition is the verifier's, with the same bar and confirmation; with
-    /// the hint it comes no later and here sooner, at most `verifier_windows` passes on
-    /// every lost frame either way.
-    #[test]
-    fn the_verifier_looks_first_where_the_frozen_filter_points() {
-        const HIDE: usize = 15;
-        const BACK: usize = 25;
+    /// The scene of the two tests below: a target hidden on frames 15–24 that comes back
+    /// 57 px from where it went (outside the verifier's tile there, inside the filter's
+    /// window) in a 960×540 frame the verifier's tiles take many lost frames to walk. The
+    /// filter may not take the track back (`reacquire_threshold` 1, which no confidence
+    /// reaches), so every re-acquisition is the mock verifier's, which finds the target only
+    /// when it looks near it. Returns the frame of the re-acquisition (checked: not while
+    /// hidden, on the target), after checking that no lost frame spent more than
+    /// `verifier_windows` passes.
+    fn reacquired_beside_the_loss(configure: impl Fn(&mut TrackerConfig)) -> Option<usize> {
         let seq = SynthParams {
             width: 960,
             height: 540,
             target: (28.0, 24.0),
             frames: 45,
-            hidden: Some((HIDE, BACK)),
+            hidden: Some((REHIDE, REBACK)),
             reappear_offset: (45.0, 35.0),
             ..SynthParams::default()
         };
-        let run = |hint: bool| {
-            let mut cfg = TrackerConfig::default();
-            cfg.redetection.reacquire_threshold = 1.0;
-            cfg.redetection.verifier_filter_hint = hint;
-            let windows = cfg.redetection.verifier_windows;
-            let truth = Arc::new(Mutex::new(None));
-            let calls = Arc::new(AtomicUsize::new(0));
-            let oracle = Oracle {
-                truth: Arc::clone(&truth),
-                calls: Arc::clone(&calls),
-            };
-            let mut t = started_with(&seq, &cfg, Some(Box::new(oracle)));
-            for i in 1..seq.frames {
-                let f = seq.frame(i);
-                *truth.lock().unwrap() = f.visible.then(|| f.truth.center());
-                let frame =
-                    Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
-                let before = calls.load(Ordering::Relaxed);
-                let o = t.update(&frame).unwrap();
-                let passes = calls.load(Ordering::Relaxed) - before;
-                if o.state == TrackState::Lost {
-                    assert!(passes <= windows, "frame {i}: {passes} passes");
-                }
-                if o.state == TrackState::Reacquired {
-                    assert!(i >= BACK, "re-acquired at {i} while hidden");
-                    let e = o.bbox.center().distance(&f.truth.center());
-                    assert!(e < 8.0, "frame {i}: centre error {e}");
-                    return Some(i);
-                }
-            }
-            None
+        let mut cfg = TrackerConfig::default();
+        cfg.redetection.reacquire_threshold = 1.0;
+        configure(&mut cfg);
+        let windows = cfg.redetection.verifier_windows;
+        let truth = Arc::new(Mutex::new(None));
+        let calls = Arc::new(AtomicUsize::new(0));
+        let oracle = Oracle {
+            truth: Arc::clone(&truth),
+            calls: Arc::clone(&calls),
         };
+        let mut t = started_with(&seq, &cfg, Some(Box::new(oracle)));
+        for i in 1..seq.frames {
+            let f = seq.frame(i);
+            *truth.lock().unwrap() = f.visible.then(|| f.truth.center());
+            let frame = Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
+            let before = calls.load(Ordering::Relaxed);
+            let o = t.update(&frame).unwrap();
+            let passes = calls.load(Ordering::Relaxed) - before;
+            if o.state == TrackState::Lost {
+                assert!(passes <= windows, "frame {i}: {passes} passes");
+            }
+            if o.state == TrackState::Reacquired {
+                assert!(i >= REBACK, "re-acquired at {i} while hidden");
+                let e = o.bbox.center().distance(&f.truth.center());
+                assert!(e < 8.0, "frame {i}: centre error {e}");
+                return Some(i);
+            }
+        }
+        None
+    }
+
+    /// First frame hidden and first frame back of [`reacquired_beside_the_loss`].
+    const REHIDE: usize = 15;
+    const REBACK: usize = 25;
+
+    /// `redetection.verifier_filter_hint`: in the scene of [`reacquired_beside_the_loss`]
+    /// the verifier finds the target as soon as the frozen filter's windows point at it;
+    /// with the hint the re-acquisition comes no later and here sooner.
+    #[test]
+    fn the_verifier_looks_first_where_the_frozen_filter_points() {
+        let run =
+            |hint: bool| reacquired_beside_the_loss(|c| c.redetection.verifier_filter_hint = hint);
         let with = run(true).expect("never re-acquired with the hint");
         // Without it the tiles walk from the loss point and reach the target at frame 51
         // (measured with 60 frames), after this scene's end.
@@ -1699,61 +1706,16 @@ mod tests {
         // frames while hidden), the filter points at it on the next, the verifier finds it
         // there and confirms it on the following frames.
         let confirm = TrackerConfig::default().redetection.reacquire_frames;
-        assert!(with <= BACK + 2 + confirm, "re-acquired at {with}");
+        assert!(with <= REBACK + 2 + confirm, "re-acquired at {with}");
     }
 
-    /// `redetection.verifier_proposals`: in the scene of the filter-hint test above (the
-    /// target back 57 px from where it was lost, where the verifier's tile walk reaches it
-    /// only after the scene's end), the verifier's first passes on the whole-frame
-    /// template-match proposals find it as soon as the track is lost: the cheap prior
-    /// orders the expensive search. Only the verifier can take the track back
-    /// (`reacquire_threshold` 1), with the same bar and confirmation, within
-    /// `verifier_windows` passes on every lost frame.
+    /// `redetection.verifier_proposals`: in the same scene the verifier's first passes on
+    /// the whole-frame template-match proposals find the target soon after the track is
+    /// lost, where the tile walk reaches it only after the scene's end: the cheap prior
+    /// orders the expensive search, with the same bar and confirmation.
     #[test]
     fn the_verifier_looks_first_where_the_template_match_points() {
-        const HIDE: usize = 15;
-        const BACK: usize = 25;
-        let seq = SynthParams {
-            width: 960,
-            height: 540,
-            target: (28.0, 24.0),
-            frames: 45,
-            hidden: Some((HIDE, BACK)),
-            reappear_offset: (45.0, 35.0),
-            ..SynthParams::default()
-        };
-        let run = |proposals: usize| {
-            let mut cfg = TrackerConfig::default();
-            cfg.redetection.reacquire_threshold = 1.0;
-            cfg.redetection.verifier_proposals = proposals;
-            let windows = cfg.redetection.verifier_windows;
-            let truth = Arc::new(Mutex::new(None));
-            let calls = Arc::new(AtomicUsize::new(0));
-            let oracle = Oracle {
-                truth: Arc::clone(&truth),
-                calls: Arc::clone(&calls),
-            };
-            let mut t = started_with(&seq, &cfg, Some(Box::new(oracle)));
-            for i in 1..seq.frames {
-                let f = seq.frame(i);
-                *truth.lock().unwrap() = f.visible.then(|| f.truth.center());
-                let frame =
-                    Frame::packed(&f.rgb, seq.width, seq.height, PixelFormat::Rgb8).unwrap();
-                let before = calls.load(Ordering::Relaxed);
-                let o = t.update(&frame).unwrap();
-                let passes = calls.load(Ordering::Relaxed) - before;
-                if o.state == TrackState::Lost {
-                    assert!(passes <= windows, "frame {i}: {passes} passes");
-                }
-                if o.state == TrackState::Reacquired {
-                    assert!(i >= BACK, "re-acquired at {i} while hidden");
-                    let e = o.bbox.center().distance(&f.truth.center());
-                    assert!(e < 8.0, "frame {i}: centre error {e}");
-                    return Some(i);
-                }
-            }
-            None
-        };
+        let run = |n: usize| reacquired_beside_the_loss(|c| c.redetection.verifier_proposals = n);
         let with = run(2).expect("never re-acquired with the proposals");
         let without = run(0);
         println!("re-acquired at {with} with 2 proposals, at {without:?} without");
@@ -1762,7 +1724,7 @@ mod tests {
             "{with} with the proposals, {without:?} without"
         );
         let confirm = TrackerConfig::default().redetection.reacquire_frames;
-        assert!(with <= BACK + 2 + confirm + 2, "re-acquired at {with}");
+        assert!(with <= REBACK + 2 + confirm + 2, "re-acquired at {with}");
     }
 
     /// `redetection.filter_search`: with a verifier searching the lost frames (`auto`) the
