@@ -278,8 +278,9 @@ fn hit_scale(st: &State, hit: &VerifierHit) -> f32 {
 /// or spend `verifier_windows` on the whole-frame tiles, the first of them (with
 /// `verifier_filter_hint`) on `hint`, the frozen filter's most confident window of the
 /// frame (position and absolute scale): the cheap witness points, the learned one looks
-/// there before it walks on; then (with `verifier_proposals`) on `proposals`, the frame's
-/// best template-match proposals, at the scale of the loss. The candidate once it has been above
+/// there before it walks on; then (with `verifier_proposals`) on the frame's best
+/// template-match proposals at the scale of the loss (`proposals`, the filter's of this
+/// frame, matched again only when they are fewer). The candidate once it has been above
 /// `verifier_threshold` for `reacquire_frames` frames in a row and (with
 /// `verifier_filter_check`) the frozen filter makes it a candidate too. A candidate the
 /// filter refuses is dropped (it must be confirmed anew).
@@ -324,12 +325,23 @@ fn verify(
         };
     }
     let at_loss = st.lost.scale_at_loss;
-    let mut firsts = r.verifier_filter_hint.then_some(hint).into_iter().chain(
+    // The match only when tile passes are left (a candidate being followed takes none) and
+    // the filter's sweep did not already find as many.
+    let wanted = r.verifier_proposals.min(passes);
+    let own;
+    let proposals = if proposals.len() >= wanted {
         proposals
-            .iter()
-            .take(r.verifier_proposals)
-            .map(|p| (p.center, at_loss)),
-    );
+    } else {
+        let side = template_side(st, at_loss);
+        let l = &mut st.lost;
+        own = propose(frame, &l.appearance, side, wanted, &mut l.scratch);
+        &own[..]
+    };
+    let mut firsts = r
+        .verifier_filter_hint
+        .then_some(hint)
+        .into_iter()
+        .chain(proposals.iter().take(wanted).map(|p| (p.center, at_loss)));
     for _ in 0..passes {
         let (center, scale) = match firsts.next() {
             Some(h) => h,
@@ -467,21 +479,14 @@ pub(super) fn search(
     } else {
         0
     };
-    // The verifier's share (`verifier_proposals`) comes from the same match, when it will
-    // search this frame: computed once for both.
-    let verifier_wanted = if verifier.is_some() && p.enabled {
-        p.verifier_proposals
-    } else {
-        0
-    };
     let proposals = propose(
         frame,
         &st.lost.appearance,
         side,
-        wanted.max(verifier_wanted),
+        wanted,
         &mut st.lost.scratch,
     );
-    for pr in proposals.iter().take(wanted).copied() {
+    for pr in proposals.iter().copied() {
         let scale = st.lost.scale_at_loss;
         let (pos, conf, peak) = evaluate(st, frame, pr.center, scale, spec)?;
         best.offer((pos, conf, peak), scale);
