@@ -453,6 +453,11 @@ pub struct RedetectionConfig {
     /// scale of the loss) before the tile walk: a cheap prior over the whole frame orders
     /// the expensive search. 0 = the tile walk alone.
     pub verifier_proposals: usize,
+    /// Side of the verifier's whole-frame tiles in grid points, even: a tile is a square of
+    /// `16·n − 1` pixels at NanoTrack's resolution (16: NanoTrack's 255-pixel search crop),
+    /// so a larger tile covers more of the frame in one pass at a cost that goes with its
+    /// area. Candidates, hints and proposals keep the 16-cell crop.
+    pub verifier_tile_cells: usize,
     /// Whether the frozen filter sweeps the frame (whole-frame proposals and the tile walk,
     /// within `windows_per_frame`) while lost, or only follows the last position and its
     /// candidate: `auto` sweeps only when no verifier searches (`verifier: none`) or the
@@ -519,6 +524,7 @@ impl Default for RedetectionConfig {
             verifier_filter_check: false,
             verifier_filter_hint: false,
             verifier_proposals: 0,
+            verifier_tile_cells: 16,
             filter_search: FilterSearch::Auto,
         }
     }
@@ -976,6 +982,18 @@ impl TrackerConfig {
             r.verifier_proposals,
         )?;
         keys::spec("redetection.verifier_scales").check_list(&r.verifier_scales)?;
+        int_key("redetection.verifier_tile_cells", r.verifier_tile_cells)?;
+        check(
+            r.verifier_tile_cells.is_multiple_of(2),
+            "redetection.verifier_tile_cells",
+            r.verifier_tile_cells,
+            "even (the crop centre is a grid point only for an even side)",
+        )?;
+        if r.verifier_tile_cells != 16 && r.verifier == VerifierKind::NanotrackOrt {
+            return Err(ConfigError::Inconsistent(
+                "redetection.verifier_tile_cells other than 16 needs redetection.verifier nanotrack (the ONNX Runtime networks are planned for 16)".into(),
+            ));
+        }
         float_key("redetection.verifier_threshold", r.verifier_threshold)?;
         let b = &self.box_refine;
         float_key("box_refine.min_score", b.min_score)?;

@@ -1727,6 +1727,22 @@ mod tests {
         assert!(with <= REBACK + 2 + confirm + 2, "re-acquired at {with}");
     }
 
+    /// `redetection.verifier_tile_cells`: larger tiles cover more of the frame a pass, so
+    /// the walk from the loss point reaches the re-entered target within the scene, where
+    /// NanoTrack's 16-cell tiles reach it only after its end (the verifier here is the oracle
+    /// of [`reacquired_beside_the_loss`], asked with each tile's square: the larger tile's).
+    #[test]
+    fn larger_verifier_tiles_reach_the_target_in_fewer_passes() {
+        let run = |n: usize| reacquired_beside_the_loss(|c| c.redetection.verifier_tile_cells = n);
+        let larger = run(24).expect("never re-acquired with 24-cell tiles");
+        let own = run(16);
+        println!("re-acquired at {larger} with 24-cell tiles, at {own:?} with 16");
+        assert!(
+            own.is_none_or(|o| larger < o),
+            "{larger} with 24 cells, {own:?} with 16"
+        );
+    }
+
     /// `redetection.filter_search`: with a verifier searching the lost frames (`auto`) the
     /// frozen filter only follows the last position and its candidate, so a target that
     /// re-enters far away is the verifier's to find; `always` lets the filter's own sweep

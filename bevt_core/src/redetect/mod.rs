@@ -125,6 +125,26 @@ pub trait Verifier: Send + std::fmt::Debug {
             }
         }))
     }
+
+    /// As [`Self::search_above`] on a search crop of `cells × cells` grid points
+    /// (`redetection.verifier_tile_cells`): `side` is the square the crop covers, at the
+    /// verifier's resolution (`16·cells − 1` pixels for NanoTrack; 16 cells is
+    /// [`Self::search_above`]). A verifier without crops of other sizes searches the same
+    /// square with its own (this default).
+    ///
+    /// # Errors
+    /// [`TrackError::Feature`] when the network fails or cannot take the size.
+    fn search_above_cells(
+        &mut self,
+        frame: &Frame<'_>,
+        center: Point2,
+        side: f32,
+        bar: f32,
+        cells: usize,
+    ) -> Result<Option<Scored>, TrackError> {
+        let _ = cells;
+        self.search_above(frame, center, side, bar)
+    }
 }
 
 /// Upper bound on the tiles of one plan (per scale); the stride grows to respect it.

@@ -192,6 +192,10 @@ struct SizedPlans {
 /// position.
 pub const CENTRE_RADIUS: usize = 1;
 
+/// Largest side, in grid points, of the sized search maps (a 511-pixel crop): the plans'
+/// buffers stay within a few tens of MB whatever the configuration asks.
+pub const MAX_SIZED_CELLS: usize = 32;
+
 impl Plans {
     /// The plans for search maps of `cells × cells` (planned once per process and size).
     fn sized(&self, cells: usize) -> Result<Arc<SizedPlans>, NanoError> {
@@ -837,12 +841,26 @@ fn hit_at(
     score: f32,
     loc: &[f32],
 ) -> VerifierHit {
-    let n = SEARCH_CELLS * SEARCH_CELLS;
-    let (j, k) = (i / SEARCH_CELLS, i % SEARCH_CELLS);
-    let gx = (k as f32 - 8.0) * STRIDE + GRID_CENTRE;
-    let gy = (j as f32 - 8.0) * STRIDE + GRID_CENTRE;
+    hit_at_cells(frame, center, side, SEARCH_CELLS, (i, score), loc)
+}
+
+/// [`hit_at`] on maps of `cells × cells` points from a crop of `16·cells − 1` pixels (the
+/// crop centre at grid point `cells / 2`, the head's distances in the same crop pixels).
+fn hit_at_cells(
+    frame: &Frame<'_>,
+    center: Point2,
+    side: f32,
+    cells: usize,
+    (i, score): (usize, f32),
+    loc: &[f32],
+) -> VerifierHit {
+    let n = cells * cells;
+    let (j, k) = (i / cells, i % cells);
+    let half = (cells / 2) as f32;
+    let gx = (k as f32 - half) * STRIDE + GRID_CENTRE;
+    let gy = (j as f32 - half) * STRIDE + GRID_CENTRE;
     let (l, t, r, b) = (loc[i], loc[n + i], loc[2 * n + i], loc[3 * n + i]);
-    let px = side / SEARCH_SIDE as f32;
+    let px = side / (STRIDE_PX * cells - 1) as f32;
     let fw = frame.width() as f32;
     let fh = frame.height() as f32;
     let pos = Point2 {
@@ -935,15 +953,63 @@ impl NanoVerifier {
         if cells == SEARCH_CELLS {
             return self.score_maps(frame, center, side);
         }
+        let Some(feat) = self.sized_features(frame, center, side, cells)? else {
+            return Ok(None);
+        };
+        let Backend::Native { sized: Some(n), .. } = &mut self.backend else {
+            return Ok(None);
+        };
+        let t = TEMPLATE_CELLS;
+        let inputs: [(&[usize], &[f32]); 2] = [
+            (&[1, CHANNELS, t, t], &self.template),
+            (&[1, CHANNELS, cells, cells], &feat),
+        ];
+        if let Some((cls, reg)) = n.centre.as_mut().filter(|_| centre) {
+            let w = 2 * CENTRE_RADIUS + 1; // the shapes checked when planned
+            let logits = cls
+                .run(&inputs, &[("output1", &[1, 2, w, w])])?
+                .swap_remove(0);
+            let loc = reg
+                .run(&inputs, &[("output2", &[1, 4, w, w])])?
+                .swap_remove(0);
+            let lo = cells / 2 - CENTRE_RADIUS;
+            return Ok(Some((
+                embed(&margins_of(&logits), w, cells, lo),
+                embed(&loc, w, cells, lo),
+            )));
+        }
+        let logits = n
+            .cls
+            .run(&inputs, &[("output1", &[1, 2, cells, cells])])?
+            .swap_remove(0);
+        let loc = n
+            .reg
+            .run(&inputs, &[("output2", &[1, 4, cells, cells])])?
+            .swap_remove(0);
+        let margins = margins_of(&logits);
+        Ok(Some((margins, loc)))
+    }
+
+    /// The backbone's features of the square of side `side` at `center` resampled to
+    /// `16·cells − 1` pixels (`cells` even, 4 to [`MAX_SIZED_CELLS`], not 16), on the sized
+    /// plans (planned on first use, once per process and size); `None` without a template
+    /// or for a degenerate side.
+    fn sized_features(
+        &mut self,
+        frame: &Frame<'_>,
+        center: Point2,
+        side: f32,
+        cells: usize,
+    ) -> Result<Option<Vec<f32>>, TrackError> {
         let path = self.backend.paths().0.to_string();
         let run_err = |reason: String| NanoError::Run {
             key: BACKBONE_KEY,
             path: path.clone(),
             reason,
         };
-        if !(4..=SEARCH_CELLS).contains(&cells) || !cells.is_multiple_of(2) {
+        if !(4..=MAX_SIZED_CELLS).contains(&cells) || !cells.is_multiple_of(2) {
             return Err(run_err(format!(
-                "search maps of {cells} cells; an even number from 4 to 16 is supported"
+                "search maps of {cells} cells; an even number from 4 to {MAX_SIZED_CELLS} is supported"
             ))
             .into());
         }
@@ -982,35 +1048,57 @@ impl NanoVerifier {
                 &[("output", &[1, CHANNELS, cells, cells])],
             )?
             .swap_remove(0);
+        Ok(Some(feat))
+    }
+
+    /// [`Verifier::search_above`] on a search crop of `16·cells − 1` pixels (the square of
+    /// side `side` at `center`; `cells` even, 4 to [`MAX_SIZED_CELLS`]; 16 is
+    /// [`Verifier::search_above`] itself): the classification branch on the whole
+    /// `cells × cells` map, the regression branch only when its best point reaches `bar`.
+    /// A larger crop covers more of the frame in one pass, its cost going with its area.
+    ///
+    /// # Errors
+    /// A network error; `cells` odd or out of range, or the ONNX Runtime backend with
+    /// `cells` other than 16.
+    pub fn search_above_sized(
+        &mut self,
+        frame: &Frame<'_>,
+        center: Point2,
+        side: f32,
+        bar: f32,
+        cells: usize,
+    ) -> Result<Option<Scored>, TrackError> {
+        if cells == SEARCH_CELLS {
+            return self.search_above(frame, center, side, bar);
+        }
+        let Some(feat) = self.sized_features(frame, center, side, cells)? else {
+            return Ok(None);
+        };
+        let Backend::Native { sized: Some(n), .. } = &mut self.backend else {
+            return Ok(None);
+        };
         let t = TEMPLATE_CELLS;
         let inputs: [(&[usize], &[f32]); 2] = [
             (&[1, CHANNELS, t, t], &self.template),
             (&[1, CHANNELS, cells, cells], &feat),
         ];
-        if let Some((cls, reg)) = n.centre.as_mut().filter(|_| centre) {
-            let w = 2 * CENTRE_RADIUS + 1; // the shapes checked when planned
-            let logits = cls
-                .run(&inputs, &[("output1", &[1, 2, w, w])])?
-                .swap_remove(0);
-            let loc = reg
-                .run(&inputs, &[("output2", &[1, 4, w, w])])?
-                .swap_remove(0);
-            let lo = cells / 2 - CENTRE_RADIUS;
-            return Ok(Some((
-                embed(&margins_of(&logits), w, cells, lo),
-                embed(&loc, w, cells, lo),
-            )));
-        }
         let logits = n
             .cls
             .run(&inputs, &[("output1", &[1, 2, cells, cells])])?
             .swap_remove(0);
+        let margins = margins_of(&logits);
+        let Some((i, score)) = best_point(&margins) else {
+            return Ok(None);
+        };
+        if score < bar {
+            return Ok(Some(Scored::Below(score)));
+        }
         let loc = n
             .reg
             .run(&inputs, &[("output2", &[1, 4, cells, cells])])?
             .swap_remove(0);
-        let margins = margins_of(&logits);
-        Ok(Some((margins, loc)))
+        let hit = hit_at_cells(frame, center, side, cells, (i, score), &loc);
+        Ok(Some(Scored::Hit(hit)))
     }
 
     /// Whether the last sized maps' plans include the windowed centre branches (`None`:
@@ -1096,6 +1184,17 @@ impl Verifier for NanoVerifier {
             Some(loc) if score >= bar => Scored::Hit(hit_at(frame, center, side, i, score, &loc)),
             _ => Scored::Below(score),
         }))
+    }
+
+    fn search_above_cells(
+        &mut self,
+        frame: &Frame<'_>,
+        center: Point2,
+        side: f32,
+        bar: f32,
+        cells: usize,
+    ) -> Result<Option<Scored>, TrackError> {
+        self.search_above_sized(frame, center, side, bar, cells)
     }
 }
 
@@ -1244,13 +1343,76 @@ mod tests {
                 "{cells} cells: box {bw} x {bh} for a {w} x {h} target"
             );
         }
-        for bad in [3usize, 11, 18] {
+        for bad in [3usize, 11, 34] {
             assert!(v.score_maps_sized(&frame, c, 100.0, bad).is_err(), "{bad}");
         }
         assert!(v
             .score_maps_sized(&frame, c, f32::NAN, 12)
             .unwrap()
             .is_none());
+    }
+
+    /// Larger tiles (`redetection.verifier_tile_cells`): a crop of 24 or 32 cells whose
+    /// centre is several cells off the target finds it where it is, with a box of about its
+    /// size, as NanoTrack's own crop centred on it does; the score alone (bar +∞) is the
+    /// hit's score; odd or out-of-range sides are errors.
+    #[test]
+    fn larger_tiles_find_an_off_centre_target_where_it_is() {
+        let (px, size, c, (w, h)) = synth(0);
+        let frame = Frame::packed(&px, size.0, size.1, PixelFormat::Rgb8).unwrap();
+        let mut v = NanoVerifier::new("", "").unwrap();
+        v.set_template(&frame, c, w, h).unwrap();
+        let search = 2.0 * context_side(w, h);
+        let Some(Scored::Hit(own)) = v.search_above(&frame, c, search, 0.0).unwrap() else {
+            panic!("NanoTrack's crop on the target finds no hit");
+        };
+        for cells in [24usize, 32] {
+            let side = search * (16 * cells - 1) as f32 / SEARCH_SIDE as f32;
+            // The crop centre 5 cells left of and 3 cells below the target (crop pixels at
+            // the network's resolution: 16 a cell).
+            let k = side / (16 * cells - 1) as f32;
+            let at = Point2 {
+                x: c.x - 80.0 * k,
+                y: c.y + 48.0 * k,
+            };
+            let Some(Scored::Hit(h_)) = v.search_above_sized(&frame, at, side, 0.0, cells).unwrap()
+            else {
+                panic!("{cells} cells: no hit");
+            };
+            let off = ((h_.pos.x - c.x).powi(2) + (h_.pos.y - c.y).powi(2)).sqrt();
+            assert!(
+                off < 0.25 * w.min(h),
+                "{cells} cells: hit at {:?}, target at {c:?}",
+                h_.pos
+            );
+            assert!(
+                (h_.w / w - 1.0).abs() < 0.35 && (h_.h / h - 1.0).abs() < 0.35,
+                "{cells} cells: box {} x {} for a {w} x {h} target",
+                h_.w,
+                h_.h
+            );
+            assert!(
+                h_.score > 0.5 * own.score,
+                "{cells}: {} against {}",
+                h_.score,
+                own.score
+            );
+            let below = v
+                .search_above_sized(&frame, at, side, f32::INFINITY, cells)
+                .unwrap();
+            assert_eq!(below, Some(Scored::Below(h_.score)), "{cells} cells");
+        }
+        assert_eq!(
+            v.search_above_sized(&frame, c, search, 0.0, 16).unwrap(),
+            Some(Scored::Hit(own)),
+            "16 cells is NanoTrack's crop"
+        );
+        for bad in [7usize, 34] {
+            assert!(
+                v.search_above_sized(&frame, c, search, 0.0, bad).is_err(),
+                "{bad}"
+            );
+        }
     }
 
     /// The centre maps are the whole maps' values at the `(2·CENTRE_RADIUS + 1)²` points

@@ -22,6 +22,7 @@ use crate::config::TrackerSpec;
 use crate::error::TrackError;
 use crate::geometry::Point2;
 use crate::image::Frame;
+use crate::redetect::nano::SEARCH_CELLS;
 use crate::redetect::{
     candidate_threshold, context_side, propose, Appearance, Candidate, CandidateTracker, Proposal,
     ProposalScratch, Scored, SearchPlan, Verifier, VerifierHit,
@@ -253,9 +254,20 @@ fn plan(st: &mut State, spec: &TrackerSpec) {
         tile_stride: VERIFIER_TILE_STRIDE,
         ..spec.config.redetection.clone()
     };
-    let vside = 2.0 * verifier_side(st, st.scale);
+    let vside = tile_side(st, r, st.scale);
     st.lost.vcand.clear();
     st.lost.vplan = SearchPlan::new(st.pos, st.frame_w, st.frame_h, vside, &vparams);
+}
+
+/// Side of the verifier's whole-frame tiles at absolute `scale`, pixels: NanoTrack's
+/// search region (twice the context side for its 255-pixel crop) grown with the crop to
+/// `redetection.verifier_tile_cells` grid points at the same resolution.
+fn tile_side(st: &State, r: &RedetectionConfig, scale: f32) -> f32 {
+    let search = 2.0 * verifier_side(st, scale);
+    match r.verifier_tile_cells {
+        SEARCH_CELLS => search,
+        cells => search * (16 * cells - 1) as f32 / (16 * SEARCH_CELLS - 1) as f32,
+    }
 }
 
 /// The verifier's template context side at absolute `scale`, pixels.
@@ -343,18 +355,25 @@ fn verify(
         .into_iter()
         .chain(proposals.iter().take(wanted).map(|p| (p.center, at_loss)));
     for _ in 0..passes {
-        let (center, scale) = match firsts.next() {
-            Some(h) => h,
+        // The hint and the proposals point at one place: NanoTrack's own crop there. The
+        // walk's tiles cover the frame: `verifier_tile_cells` grid points each.
+        let (center, scale, cells) = match firsts.next() {
+            Some((c, s)) => (c, s, SEARCH_CELLS),
             None => {
                 let Some(w) = st.lost.vplan.next_window() else {
                     break;
                 };
-                (w.center, st.lost.scale_at_loss * w.scale)
+                let scale = st.lost.scale_at_loss * w.scale;
+                (w.center, scale, r.verifier_tile_cells)
             }
         };
-        let side = 2.0 * verifier_side(st, scale);
+        let side = if cells == SEARCH_CELLS {
+            2.0 * verifier_side(st, scale)
+        } else {
+            tile_side(st, r, scale)
+        };
         st.verifier_passes += 1;
-        if let Some(Scored::Hit(h)) = v.search_above(frame, center, side, thr)? {
+        if let Some(Scored::Hit(h)) = v.search_above_cells(frame, center, side, thr, cells)? {
             let scale = hit_scale(st, &h);
             st.lost.vcand.offer(h.pos, scale, h.score, thr);
         }
