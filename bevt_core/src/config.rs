@@ -1310,6 +1310,33 @@ mod tests {
     }
 
     #[test]
+    fn the_verifier_tiles_take_even_sides_up_to_32_and_the_pure_rust_networks() {
+        let with = |cells: usize, verifier: VerifierKind| {
+            let mut c = TrackerConfig::default();
+            c.redetection.verifier_tile_cells = cells;
+            c.redetection.verifier = verifier;
+            c.validate()
+        };
+        for cells in [8, 16, 24, 32] {
+            with(cells, VerifierKind::Nanotrack).unwrap();
+        }
+        for cells in [0, 6, 17, 23, 34, 1 << 20] {
+            let e = with(cells, VerifierKind::Nanotrack)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("redetection.verifier_tile_cells"),
+                "{cells}: {e}"
+            );
+        }
+        with(16, VerifierKind::NanotrackOrt).unwrap();
+        let e = with(24, VerifierKind::NanotrackOrt)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("needs redetection.verifier nanotrack"), "{e}");
+    }
+
+    #[test]
     fn default_config_is_valid() {
         TrackerConfig::default().validate().unwrap();
     }

@@ -254,17 +254,17 @@ fn plan(st: &mut State, spec: &TrackerSpec) {
         tile_stride: VERIFIER_TILE_STRIDE,
         ..spec.config.redetection.clone()
     };
-    let vside = tile_side(st, r, st.scale);
+    let vside = tile_side(st, r.verifier_tile_cells, st.scale);
     st.lost.vcand.clear();
     st.lost.vplan = SearchPlan::new(st.pos, st.frame_w, st.frame_h, vside, &vparams);
 }
 
-/// Side of the verifier's whole-frame tiles at absolute `scale`, pixels: NanoTrack's
-/// search region (twice the context side for its 255-pixel crop) grown with the crop to
-/// `redetection.verifier_tile_cells` grid points at the same resolution.
-fn tile_side(st: &State, r: &RedetectionConfig, scale: f32) -> f32 {
+/// Side of a verifier crop of `cells` grid points at absolute `scale`, pixels: NanoTrack's
+/// search region (twice the context side for its 255-pixel crop, 16 cells, exactly) grown
+/// with the crop at the same resolution (`redetection.verifier_tile_cells` for the tiles).
+fn tile_side(st: &State, cells: usize, scale: f32) -> f32 {
     let search = 2.0 * verifier_side(st, scale);
-    match r.verifier_tile_cells {
+    match cells {
         SEARCH_CELLS => search,
         cells => search * (16 * cells - 1) as f32 / (16 * SEARCH_CELLS - 1) as f32,
     }
@@ -367,11 +367,7 @@ fn verify(
                 (w.center, scale, r.verifier_tile_cells)
             }
         };
-        let side = if cells == SEARCH_CELLS {
-            2.0 * verifier_side(st, scale)
-        } else {
-            tile_side(st, r, scale)
-        };
+        let side = tile_side(st, cells, scale);
         st.verifier_passes += 1;
         if let Some(Scored::Hit(h)) = v.search_above_cells(frame, center, side, thr, cells)? {
             let scale = hit_scale(st, &h);
