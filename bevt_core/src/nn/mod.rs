@@ -69,6 +69,10 @@ enum Step {
         bias: Vec<f32>,
         /// An activation fused in (applied to the output in place).
         act: Option<Unary>,
+        /// [`ConvKind::Pointwise`] only: the buffer of one factor per input channel that
+        /// multiplies `x`'s planes, and the activation then applied to the products: a
+        /// channel-scaling `Mul` step fused in (see `Builder::conv`).
+        scale: Option<(usize, Option<Unary>)>,
     },
     Unary {
         x: usize,
@@ -480,7 +484,7 @@ impl Builder {
     }
 
     fn conv(&mut self, n: &Node) -> Result<(), Error> {
-        let (x, xs) = self.buf(&self.need(n, 0)?)?;
+        let (mut x, xs) = self.buf(&self.need(n, 0)?)?;
         let w = self
             .constant(n, 1, "kernel")?
             .ok_or_else(|| format!("{}: no kernel", who(n)))?;
@@ -609,6 +613,35 @@ impl Builder {
             }
             self.plan.col_len = self.plan.col_len.max(col);
         }
+        // A 1 × 1 convolution whose input is the product the last step computed of `c` planes
+        // and one factor per plane (a squeeze-excitation layer's output, `x · s` with `s` of
+        // shape [1, C, 1, 1], its activation fused in or none), read by nothing else: the
+        // factors and the activation are applied as the convolution copies its input tiles
+        // (`ops::pointwise`), the same values bit for bit, and the product's planes are
+        // neither written nor read again. (Every tensor has a slot of its own, so the last
+        // step writing `x` means it computed this input.)
+        let mut scale = None;
+        if matches!(kind, ConvKind::Pointwise) && batch == 1 {
+            let once = self.uses.get(n.inputs[0].as_str()).copied().unwrap_or(0) == 1;
+            if let Some(&Step::Binary {
+                a,
+                b,
+                y,
+                op: Binary::Mul,
+                ref bc,
+                act,
+            }) = self.plan.steps.last()
+            {
+                if once && y == x {
+                    if let Some(a_planes) = ops::plane_scale(bc, c, h * wd) {
+                        let (planes, factors) = if a_planes { (a, b) } else { (b, a) };
+                        self.plan.steps.pop();
+                        x = planes;
+                        scale = Some((factors, act));
+                    }
+                }
+            }
+        }
         let y = self.out(n, vec![batch, m, oh, ow])?;
         let weights = match kind {
             ConvKind::Pointwise | ConvKind::Rows => ops::pack_rows(&w.to_f32(), m, cg * kh * kw),
@@ -623,6 +656,7 @@ impl Builder {
             weights,
             bias,
             act: None,
+            scale,
         });
         Ok(())
     }
@@ -964,8 +998,12 @@ impl Runner {
                 weights,
                 bias,
                 act,
+                scale,
             } => {
-                let (xb, yb) = Self::pair(&mut self.bufs, *x, *y);
+                // Take the output out so that the input and the factors can be borrowed.
+                let mut out = std::mem::take(&mut self.bufs[*y]);
+                let (xb, yb) = (&self.bufs[*x], out.as_mut_slice());
+                let scale = scale.map(|(s, f)| (self.bufs[s].as_slice(), f));
                 let (in_len, out_len) = (s.c * s.h * s.w, s.m * s.oh * s.ow);
                 let plane = s.oh * s.ow;
                 for i in 0..*batch {
@@ -978,7 +1016,7 @@ impl Runner {
                         }
                         ConvKind::Pointwise => {
                             let (mkn, col) = ((s.m, s.c, plane), &mut self.col);
-                            ops::pointwise(mkn, weights, xi, bias, *act, yi, col);
+                            ops::pointwise(mkn, weights, xi, scale, bias, *act, yi, col);
                             continue; // the activation is applied
                         }
                         ConvKind::Rows => {
@@ -1026,6 +1064,7 @@ impl Runner {
                         ops::unary_in_place(*f, yi);
                     }
                 }
+                self.bufs[*y] = out;
             }
             Step::Unary { x, y, f } => {
                 let (xb, yb) = Self::pair(&mut self.bufs, *x, *y);
@@ -1539,6 +1578,140 @@ mod tests {
             .collect();
         assert!(worst(&got, &want) < 1e-5);
         assert!(want.contains(&0.0) && want.iter().any(|&v| v > 1.0));
+    }
+
+    #[test]
+    fn a_channel_scale_fuses_into_the_next_pointwise_convolution_bit_for_bit() {
+        // A squeeze-excitation layer's output: planes times one factor per plane (either
+        // operand order, with or without an activation after it), then a 1 × 1 convolution.
+        // 43 × 29 planes: tiles of 32-column blocks and a masked tail.
+        let (c, h, w, m) = (24, 43, 29, 40);
+        let k = f32s(&[m, c, 1, 1], 11);
+        let b = f32s(&[m], 12);
+        let x = f32s(&[1, c, h, w], 13).to_f32();
+        let s: Vec<f32> = f32s(&[1, c, 1, 1], 14)
+            .to_f32()
+            .iter()
+            .map(|v| 1.0 / (1.0 + (-v).exp()))
+            .collect();
+        let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+        for (planes_first, hardswish) in [(true, false), (false, false), (true, true)] {
+            let mut nodes = vec![if planes_first {
+                node("Mul", &["x", "s"], "p", &[])
+            } else {
+                node("Mul", &["s", "x"], "p", &[])
+            }];
+            let q = if hardswish {
+                nodes.push(node("HardSwish", &["p"], "q", &[]));
+                "q"
+            } else {
+                "p"
+            };
+            nodes.push(node("Conv", &[q, "k", "b"], "c", &[]));
+            nodes.push(node("Relu", &["c"], "y", &[]));
+            let mdl = model(nodes, vec![("k", k.clone()), ("b", b.clone())], &["x", "s"]);
+            let io: [(&str, &[usize]); 2] = [("x", &[1, c, h, w]), ("s", &[1, c, 1, 1])];
+            let fused = Plan::new(&mdl, &io, &["y"]).unwrap();
+            assert_eq!(
+                fused.steps.len(),
+                1,
+                "the Mul and the activations in the Conv"
+            );
+            assert!(matches!(
+                fused.steps[0],
+                Step::Conv {
+                    kind: ConvKind::Pointwise,
+                    scale: Some(_),
+                    ..
+                }
+            ));
+            // The convolution's input also an output: read twice, so it is computed apart.
+            let apart = Plan::new(&mdl, &io, &["y", q]).unwrap();
+            assert_eq!(apart.steps.len(), 2);
+            assert!(matches!(apart.steps[1], Step::Conv { scale: None, .. }));
+            let mut rf = Runner::new(std::sync::Arc::new(fused));
+            let mut ra = Runner::new(std::sync::Arc::new(apart));
+            let got = rf.run(&[&x, &s]).unwrap()[0].to_vec();
+            let outs = ra.run(&[&x, &s]).unwrap();
+            let case = format!("planes first {planes_first}, HardSwish {hardswish}");
+            assert_eq!(bits(&got), bits(outs[0]), "{case}");
+            // And what the two steps compute: the products, then the convolution.
+            let p: Vec<f32> = x
+                .iter()
+                .enumerate()
+                .map(|(i, &v)| v * s[i / (h * w)])
+                .map(|v| {
+                    if hardswish {
+                        Unary::HardSwish.eval(v)
+                    } else {
+                        v
+                    }
+                })
+                .collect();
+            assert_eq!(bits(outs[1]), bits(&p), "{case}");
+            let conv = naive_conv(&p, (c, h, w), &k, &b.to_f32(), 1, (1, 1), (0, 0, 0, 0));
+            let relu: Vec<f32> = conv.iter().map(|v| v.max(0.0)).collect();
+            assert!(worst(&got, &relu) < 1e-5, "{case}");
+        }
+        // Factors per row or per value are not a channel scale: not fused.
+        for sshape in [[1, 1, h, 1], [1, c, h, w]] {
+            let mdl = model(
+                vec![
+                    node("Mul", &["x", "s"], "p", &[]),
+                    node("Conv", &["p", "k", "b"], "y", &[]),
+                ],
+                vec![("k", k.clone()), ("b", b.clone())],
+                &["x", "s"],
+            );
+            let io: [(&str, &[usize]); 2] = [("x", &[1, c, h, w]), ("s", &sshape)];
+            let p = Plan::new(&mdl, &io, &["y"]).unwrap();
+            assert_eq!(p.steps.len(), 2, "{sshape:?}");
+        }
+    }
+
+    /// NanoTrack v2's backbone: each of its six squeeze-excitation layers scales the
+    /// channels that a 1 × 1 convolution reads next (five with a HardSwish between), and
+    /// every one of them is fused into that convolution.
+    #[test]
+    fn the_backbones_channel_scales_all_fuse() {
+        static BACKBONE: &[u8] =
+            include_bytes!("../../../models/nanotrack/nanotrackv2_backbone_sim_dyn.onnx");
+        let m = onnx::parse(BACKBONE).unwrap();
+        let muls = m.nodes.iter().filter(|n| n.op_type == "Mul").count();
+        assert_eq!(muls, 6);
+        let p = Plan::new(&m, &[("input", &[1, 3, 255, 255])], &["output"]).unwrap();
+        let scaled = p
+            .steps
+            .iter()
+            .filter(|s| matches!(s, Step::Conv { scale: Some(_), .. }))
+            .count();
+        let with_act = p
+            .steps
+            .iter()
+            .filter(|s| {
+                matches!(
+                    s,
+                    Step::Conv {
+                        scale: Some((_, Some(_))),
+                        ..
+                    }
+                )
+            })
+            .count();
+        let left = p
+            .steps
+            .iter()
+            .filter(|s| {
+                matches!(
+                    s,
+                    Step::Binary {
+                        op: Binary::Mul,
+                        ..
+                    }
+                )
+            })
+            .count();
+        assert_eq!((scaled, with_act, left), (6, 5, 0));
     }
 
     #[test]

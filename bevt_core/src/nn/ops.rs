@@ -169,6 +169,21 @@ pub(super) struct Broadcast {
     sb: Vec<usize>,
 }
 
+/// Which operand of a broadcast product scales whole planes: `Some(true)` when `a` holds
+/// `channels` planes of `plane` values and `b` one factor per plane (`[1, C, H, W] ·
+/// [1, C, 1, 1]`, a squeeze-excitation layer's channel scale), `Some(false)` the other way
+/// round, `None` for any other broadcast.
+pub(super) fn plane_scale(bc: &Broadcast, channels: usize, plane: usize) -> Option<bool> {
+    if bc.dims != [channels, plane] || plane == 1 {
+        return None;
+    }
+    match (bc.sa.as_slice(), bc.sb.as_slice()) {
+        ([p, 1], [1, 0]) if *p == plane => Some(true),
+        ([1, 0], [p, 1]) if *p == plane => Some(false),
+        _ => None,
+    }
+}
+
 /// Row-major strides of `shape` aligned right to `rank` dimensions, 0 where `shape` has
 /// size 1 or lacks the dimension (numpy broadcasting).
 fn broadcast_strides(shape: &[usize], out: &[usize]) -> Vec<usize> {
@@ -440,11 +455,17 @@ pub(super) fn tile_cols(k: usize) -> usize {
 /// A 1 × 1 convolution of one batch item: `y[i][j] = act(Σ_p w[i][p] · x[p][j] + bias[i])`
 /// over planes of `plane` values, by [`rows_product`] on tiles of [`tile_cols`] columns
 /// copied into `tile` (at least `k · tile_cols(k)` values).
+///
+/// With `scale` (one factor per input plane and an activation `g`), `g(x[p][j] · scale[p])`
+/// in place of `x[p][j]`, computed as the tile is copied: what a channel-scaling `Mul` step
+/// (with `g` fused in) before it would have written, the same values bit for bit (the same
+/// product, then [`Unary::eval`]), without writing and reading that product's planes.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn pointwise(
     (m, k, plane): (usize, usize, usize),
     wp: &[f32],
     x: &[f32],
+    scale: Option<(&[f32], Option<Unary>)>,
     bias: &[f32],
     act: Option<Unary>,
     y: &mut [f32],
@@ -454,9 +475,25 @@ pub(super) fn pointwise(
     for j in (0..plane).step_by(nt) {
         let cols = nt.min(plane - j);
         for (p, t) in tile.chunks_exact_mut(cols).take(k).enumerate() {
-            copy_short(t, &x[p * plane + j..p * plane + j + cols]);
+            let src = &x[p * plane + j..p * plane + j + cols];
+            match scale {
+                Some((s, g)) => scale_copy(t, src, s[p], g),
+                None => copy_short(t, src),
+            }
         }
         rows_product((m, k, cols), wp, tile, cols, bias, act, &mut y[j..], plane);
+    }
+}
+
+/// `dst[i] = g(src[i] · s)`: [`Broadcast::apply`]'s product and activation, on one row
+/// (loops the compiler vectorises; AVX2 clone chosen at run time).
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))]
+fn scale_copy(dst: &mut [f32], src: &[f32], s: f32, g: Option<Unary>) {
+    for (d, &v) in dst.iter_mut().zip(src) {
+        *d = Binary::Mul.f(v, s);
+    }
+    if let Some(g) = g {
+        apply_in_place(g, dst);
     }
 }
 
