@@ -130,8 +130,9 @@ if [ "$mode" != check ]; then
   # The cross build's own settings, for its two cargo commands only (the native build below
   # must keep the test command's profile, or it would all be compiled again): its own target
   # dir; no line tables for our crates (the dependencies have none in dev already), which
-  # the tests and the eval under qemu do not read; and opt-level 0 instead of the dev
-  # profile's 1 for every package `Cargo.toml` does not name: what runs per frame under qemu
+  # the tests and the eval under qemu do not read; and opt-level 0 for every package
+  # `Cargo.toml` does not name (the dev profile's own default since 2026-12-03; kept here so
+  # that the cross build stays so if the profile changes): what runs per frame under qemu
   # keeps its own level (bevt_core and bevt_msgs at 3, the FFT, matrix and image decoding
   # crates at 3, and the generic code bevt_core instantiates), the rest is glue run once.
   # The cross build is CI's longest path and CI is CPU-bound.
