@@ -27,7 +27,10 @@
 //! safe code), the wide buffer padded to whole blocks: for the networks' square kernels (3 × 3
 //! and 5 × 5) each block summed over all kernel rows in registers and stored once, for other
 //! kernels row by row; each value is the same multiplies and adds in the same order as in
-//! the other rows, so the same bits.
+//! the other rows, so the same bits. At column stride 1 the copies of step 1 go in 16-value
+//! blocks, and where the output rows take no more blocks than the wide rows (12 × 12 and
+//! 16 × 16 maps: a row is one block) each block is stored straight into the output plane,
+//! with no wide buffer and no step 3; the taps of a kernel row are read from one window.
 //!
 //! Tested against a naive reference here; the networks' outputs against ONNX Runtime's
 //! reference values (`tests/integration/verifier.rs`).
@@ -186,7 +189,9 @@ fn depthwise_rows(
     // blocks of `LANES` for the AVX-512 rows (the values past the last output are computed
     // from the phases' zero slack and dropped).
     let span = ((g.out_h - 1) * wq + g.out_w).next_multiple_of(LANES);
-    scratch.phases.resize(sh * sw * sub + LANES, 0.0);
+    // The slack past the sub-planes: the wide rows' last block and [`wide16::rows_out`]'s
+    // windows read up to `2 · LANES + 4` values beyond them (into lanes that are dropped).
+    scratch.phases.resize(sh * sw * sub + 2 * LANES + 8, 0.0);
     scratch.wide.resize(span, 0.0);
     #[cfg(target_arch = "x86_64")]
     let v4 = pulp::x86::V4::try_new().filter(|_| wide);
@@ -207,6 +212,22 @@ fn depthwise_rows(
         ((ky % sh) * sw + kx % sw) * sub + (ky / sh) * wq + kx / sw
     }));
     let starts = &scratch.starts;
+    // The networks' square kernels at column stride 1 on AVX-512 go straight to the output
+    // rows ([`wide16::rows_out`]) where that computes no more blocks than the wide rows, if
+    // every tap of a kernel row lies where its row's window puts it and every window lies
+    // in the phases.
+    #[cfg(target_arch = "x86_64")]
+    let direct = v4.filter(|_| {
+        let (k, across) = (g.k_w, g.out_w.div_ceil(LANES));
+        let read = (g.out_h - 1) * wq + across * LANES + k - 1;
+        g.k_h == k
+            && matches!(k, 3 | 5)
+            && sw == 1
+            && g.out_h * across <= span / LANES
+            && (0..taps).all(|t| {
+                starts[t] == starts[t - t % k] + t % k && starts[t] + read <= scratch.phases.len()
+            })
+    });
     // Where each input row's values go, worked out once for all channels (every channel's
     // plane has the same layout; the divisions by the strides cost more per row than the
     // copies of 12-value rows themselves): per input row its offset in the plane and its
@@ -241,7 +262,25 @@ fn depthwise_rows(
         // 1. Padded, phase-split copy. Padded row py = y + pad_top goes to phase py % sh,
         //    row py / sh; likewise columns: input columns x ≡ r (mod sw) land in column
         //    phase (pad_left + r) % sw, from column (pad_left + r) / sw on.
-        for &(at, base_y) in &scratch.rows {
+        #[cfg(target_arch = "x86_64")]
+        let copied = match v4 {
+            Some(simd) if sw == 1 => {
+                let first = scratch.cols.first().map_or(0, |c| c.1);
+                wide16::copy_rows(
+                    simd,
+                    &mut scratch.phases,
+                    plane,
+                    &scratch.rows,
+                    x_end,
+                    first,
+                );
+                true
+            }
+            _ => false,
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let copied = false;
+        for &(at, base_y) in scratch.rows.iter().filter(|_| !copied) {
             let row = &plane[at..at + x_end];
             if sw == 2 {
                 let (lo, hi) = scratch.phases.split_at_mut(base_y + b_at.max(a_at));
@@ -276,8 +315,18 @@ fn depthwise_rows(
         let wide = &mut scratch.wide[..span];
         let kernel = &weights[c * taps..(c + 1) * taps];
         let out = &mut output[c * g.out_plane()..(c + 1) * g.out_plane()];
-        // 2. and 3. on AVX-512, for the networks' square kernels: each block of the wide
-        //    output summed over every kernel row in registers, then the valid columns.
+        // 2. and 3. on AVX-512, for the networks' square kernels: each block summed over
+        //    every kernel row in registers, at stride 1 straight into the output rows where
+        //    that costs no more blocks, else into the wide rows, then their valid columns.
+        #[cfg(target_arch = "x86_64")]
+        if let Some(simd) = direct {
+            let (phases, shape, b) = (&scratch.phases[..], (g.out_h, g.out_w, wq), bias[c]);
+            match g.k_w {
+                3 => wide16::rows_out::<3, 9, 18>(simd, out, shape, phases, starts, kernel, b),
+                _ => wide16::rows_out::<5, 25, 20>(simd, out, shape, phases, starts, kernel, b),
+            }
+            continue;
+        }
         #[cfg(target_arch = "x86_64")]
         if let Some(simd) = v4 {
             let phases = &scratch.phases[..];
@@ -418,6 +467,105 @@ mod wide16 {
             },
         );
         true
+    }
+
+    /// One channel's output for a `K × K` kernel at column stride 1 (`T` = `K²` taps
+    /// starting at `starts` in `phases`, `W` = `LANES + K − 1`), straight into the
+    /// channel's output plane `out` (`shape`: `out_h` rows of `out_w` values, `wq` apart in
+    /// the phases). Each output is the same sum as [`channel`]'s, kernel row after kernel row
+    /// from the bias (the same bits), without the wide buffer and the copy of its valid
+    /// columns.
+    ///
+    /// Per block and kernel row one window of `W` values holds the row's `K` taps (tap `kx`
+    /// at `kx`), so the taps' loads need no bounds checks of their own; two blocks are summed
+    /// at a time (two independent sums in flight). A row's last block is stored whole where
+    /// `out` has room (its lanes past the row land on outputs after it, which the blocks
+    /// after it overwrite), masked at the end. The caller has checked that every window
+    /// lies in `phases` (a window outside reads zeros).
+    pub(super) fn rows_out<const K: usize, const T: usize, const W: usize>(
+        simd: V4,
+        out: &mut [f32],
+        (out_h, out_w, wq): (usize, usize, usize),
+        phases: &[f32],
+        starts: &[usize],
+        kernel: &[f32],
+        bias: f32,
+    ) {
+        if K * K != T || W != LANES + K - 1 || kernel.len() != T || starts.len() != T {
+            return;
+        }
+        // Where each kernel row's window starts.
+        let first: [usize; K] = std::array::from_fn(|ky| starts[ky * K]);
+        simd.vectorize(
+            #[inline(always)]
+            || {
+                let w: [f32x16; T] = std::array::from_fn(|t| simd.splat_f32s(kernel[t]));
+                let at = |win: &[f32; W], o: usize| -> f32x16 {
+                    let (arrays, _) = pulp::as_arrays::<LANES, f32>(&win[o..o + LANES]);
+                    pulp::cast(arrays[0])
+                };
+                let zeros = [0.0; W];
+                let across = out_w.div_ceil(LANES);
+                let blocks = out_h * across;
+                // Where block `i` reads (from each window start), writes, and how many.
+                let place = |i: usize| {
+                    let (oy, x) = (i / across, (i % across) * LANES);
+                    (oy * wq + x, oy * out_w + x, (out_w - x).min(LANES))
+                };
+                for i in (0..blocks).step_by(2) {
+                    // An odd last block is summed twice (the same values stored twice).
+                    let both = [place(i), place((i + 1).min(blocks - 1))];
+                    let mut acc = [simd.splat_f32s(bias); 2];
+                    for (ky, &start) in first.iter().enumerate() {
+                        let r = ky * K;
+                        for (acc, &(p, _, _)) in acc.iter_mut().zip(&both) {
+                            let s = start + p;
+                            let win = phases.get(s..s + W).and_then(|v| v.first_chunk::<W>());
+                            let win = win.unwrap_or(&zeros);
+                            let mut t = simd.mul_f32s(w[r], at(win, 0));
+                            for kx in 1..K {
+                                t = simd.add_f32s(t, simd.mul_f32s(w[r + kx], at(win, kx)));
+                            }
+                            *acc = simd.add_f32s(*acc, t);
+                        }
+                    }
+                    for (acc, &(_, o, n)) in acc.iter().zip(&both) {
+                        if let Some(dst) = out.get_mut(o..o + LANES) {
+                            dst.copy_from_slice(&pulp::cast::<f32x16, [f32; LANES]>(*acc));
+                        } else if let Some(dst) = out.get_mut(o..o + n) {
+                            simd.partial_store_f32s(dst, *acc);
+                        }
+                    }
+                }
+            },
+        );
+    }
+
+    /// Step 1 of [`super::depthwise_rows`] for a column stride of 1: each input row read
+    /// (`rows`: its offset in `plane`, its base in `phases`) copied whole to `base + first`,
+    /// in blocks of 16, the rest by [`super::copy_short`].
+    pub(super) fn copy_rows(
+        simd: V4,
+        phases: &mut [f32],
+        plane: &[f32],
+        rows: &[(usize, usize)],
+        len: usize,
+        first: usize,
+    ) {
+        simd.vectorize(
+            #[inline(always)]
+            || {
+                for &(at, base) in rows {
+                    let (src, dst) = (&plane[at..at + len], &mut phases[base + first..][..len]);
+                    let mut d = dst.chunks_exact_mut(LANES);
+                    let mut s = src.chunks_exact(LANES);
+                    for (d, s) in (&mut d).zip(&mut s) {
+                        d.copy_from_slice(s);
+                    }
+                    super::copy_short(d.into_remainder(), s.remainder());
+                }
+            },
+        );
     }
 
     /// [`super::row3`]: `o + ((w₀·a + w₁·b) + w₂·c)` per value.
@@ -635,7 +783,8 @@ mod tests {
     fn the_wide_rows_give_the_narrow_rows_bits() {
         let (mut wide, mut narrow) = (Scratch::default(), Scratch::default());
         // (channels, side, kernel height, kernel width, stride): the square kernels take the
-        // in-register blocks, the others the AVX-512 rows of 3 and 5 taps.
+        // in-register blocks (at stride 1 straight to the output rows where that costs no
+        // more blocks), the others the AVX-512 rows of 3 and 5 taps.
         for (case, &(c, n, kh, k, s)) in [
             (3usize, 96usize, 3usize, 3usize, 2usize),
             (5, 24, 3, 3, 1),
@@ -648,6 +797,10 @@ mod tests {
             (2, 1, 3, 3, 1),
             (3, 16, 1, 5, 1),
             (2, 13, 5, 3, 2),
+            // Straight to the output rows: one block a row, two a row, an odd count.
+            (2, 16, 5, 5, 1),
+            (1, 32, 3, 3, 1),
+            (3, 7, 5, 5, 1),
         ]
         .iter()
         .enumerate()
