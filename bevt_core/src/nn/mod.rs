@@ -636,6 +636,10 @@ impl Builder {
                     if let Some(a_planes) = ops::plane_scale(bc, c, h * wd) {
                         let (planes, factors) = if a_planes { (a, b) } else { (b, a) };
                         self.plan.steps.pop();
+                        // Nothing writes or reads the product now: its slot holds nothing
+                        // and leaves the plan's memory bound.
+                        let freed = std::mem::take(&mut self.plan.slots[y]);
+                        self.total = self.total.saturating_sub(freed);
                         x = planes;
                         scale = Some((factors, act));
                     }
@@ -1628,6 +1632,9 @@ mod tests {
             // The convolution's input also an output: read twice, so it is computed apart.
             let apart = Plan::new(&mdl, &io, &["y", q]).unwrap();
             assert_eq!(apart.steps.len(), 2);
+            // The fused product's planes take no memory: the plans' slots differ by them.
+            let values = |p: &Plan| p.slots.iter().sum::<usize>();
+            assert_eq!(values(&fused) + c * h * w, values(&apart));
             assert!(matches!(apart.steps[1], Step::Conv { scale: None, .. }));
             let mut rf = Runner::new(std::sync::Arc::new(fused));
             let mut ra = Runner::new(std::sync::Arc::new(apart));
