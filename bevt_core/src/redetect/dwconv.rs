@@ -213,20 +213,18 @@ fn depthwise_rows(
     }));
     let starts = &scratch.starts;
     // The networks' square kernels at column stride 1 on AVX-512 go straight to the output
-    // rows ([`wide16::rows_out`]) where that computes no more blocks than the wide rows, if
-    // every tap of a kernel row lies where its row's window puts it and every window lies
-    // in the phases.
+    // rows ([`wide16::rows_out`]) where that computes no more blocks than the wide rows and
+    // every window lies in the phases (at column stride 1 a kernel row's taps are adjacent).
     #[cfg(target_arch = "x86_64")]
     let direct = v4.filter(|_| {
         let (k, across) = (g.k_w, g.out_w.div_ceil(LANES));
         let read = (g.out_h - 1) * wq + across * LANES + k - 1;
+        let last = starts.iter().max().map_or(0, |&s| s + read);
         g.k_h == k
             && matches!(k, 3 | 5)
             && sw == 1
             && g.out_h * across <= span / LANES
-            && (0..taps).all(|t| {
-                starts[t] == starts[t - t % k] + t % k && starts[t] + read <= scratch.phases.len()
-            })
+            && last <= scratch.phases.len()
     });
     // Where each input row's values go, worked out once for all channels (every channel's
     // plane has the same layout; the divisions by the strides cost more per row than the
@@ -321,11 +319,13 @@ fn depthwise_rows(
         #[cfg(target_arch = "x86_64")]
         if let Some(simd) = direct {
             let (phases, shape, b) = (&scratch.phases[..], (g.out_h, g.out_w, wq), bias[c]);
-            match g.k_w {
+            let done = match g.k_w {
                 3 => wide16::rows_out::<3, 9, 18>(simd, out, shape, phases, starts, kernel, b),
                 _ => wide16::rows_out::<5, 25, 20>(simd, out, shape, phases, starts, kernel, b),
+            };
+            if done {
+                continue;
             }
-            continue;
         }
         #[cfg(target_arch = "x86_64")]
         if let Some(simd) = v4 {
@@ -481,7 +481,8 @@ mod wide16 {
     /// at a time (two independent sums in flight). A row's last block is stored whole where
     /// `out` has room (its lanes past the row land on outputs after it, which the blocks
     /// after it overwrite), masked at the end. The caller has checked that every window
-    /// lies in `phases` (a window outside reads zeros).
+    /// lies in `phases` (a window outside reads zeros). `false` (nothing done, the caller
+    /// takes the wide rows) when the sizes do not match.
     pub(super) fn rows_out<const K: usize, const T: usize, const W: usize>(
         simd: V4,
         out: &mut [f32],
@@ -490,9 +491,16 @@ mod wide16 {
         starts: &[usize],
         kernel: &[f32],
         bias: f32,
-    ) {
-        if K * K != T || W != LANES + K - 1 || kernel.len() != T || starts.len() != T {
-            return;
+    ) -> bool {
+        let blocks = out_h * out_w.div_ceil(LANES);
+        if K * K != T
+            || W != LANES + K - 1
+            || kernel.len() != T
+            || starts.len() != T
+            || out.len() != out_h * out_w
+            || blocks == 0
+        {
+            return false;
         }
         // Where each kernel row's window starts.
         let first: [usize; K] = std::array::from_fn(|ky| starts[ky * K]);
@@ -506,7 +514,6 @@ mod wide16 {
                 };
                 let zeros = [0.0; W];
                 let across = out_w.div_ceil(LANES);
-                let blocks = out_h * across;
                 // Where block `i` reads (from each window start), writes, and how many.
                 let place = |i: usize| {
                     let (oy, x) = (i / across, (i % across) * LANES);
@@ -539,6 +546,7 @@ mod wide16 {
                 }
             },
         );
+        true
     }
 
     /// Step 1 of [`super::depthwise_rows`] for a column stride of 1: each input row read
