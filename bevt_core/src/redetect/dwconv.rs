@@ -31,6 +31,9 @@
 //! blocks, and where the output rows take no more blocks than the wide rows (12 × 12 and
 //! 16 × 16 maps: a row is one block) each block is stored straight into the output plane,
 //! with no wide buffer and no step 3; the taps of a kernel row are read from one window.
+//! At stride 2 (the backbone's down-sampling layers) square kernels skip all three steps
+//! where rows hold at least 32 values: each block's taps are the even and odd lanes of two
+//! loads from the input row where it lies, one AVX-512 permute per tap.
 //!
 //! Tested against a naive reference here; the networks' outputs against ONNX Runtime's
 //! reference values (`tests/integration/verifier.rs`).
@@ -143,6 +146,22 @@ pub struct Scratch {
     cols: Vec<(usize, usize, usize)>,
     /// Per kernel tap: where it starts reading in the phases.
     starts: Vec<usize>,
+    /// Per output block and tap pair of a stride-2 convolution read in place: its windows.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // the AVX-512 rows' only
+    windows: Vec<Window>,
+}
+
+/// Where a pair of kernel taps reads one output block's inputs from an input row
+/// ([`wide16::planes_s2`]): two 16-value loads from `base`, then per parity (`even`, `odd`)
+/// the lanes of the permute and which of them are kept (the others read outside the row:
+/// zeros).
+#[derive(Debug, Clone, Copy)]
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // read by the AVX-512 rows only
+struct Window {
+    base: usize,
+    even: [u32; LANES],
+    odd: [u32; LANES],
+    keep: [u16; 2],
 }
 
 /// Depthwise convolution of `input` (`channels` planes of `in_h × in_w`, row-major) with
@@ -181,6 +200,20 @@ fn depthwise_rows(
         || output.len() != g.channels * g.out_plane()
     {
         return false;
+    }
+    // Square kernels at stride 2 on AVX-512 read the input planes where they lie: no
+    // phase split, no wide rows ([`wide16::planes_s2`]).
+    #[cfg(target_arch = "x86_64")]
+    if let Some(simd) = pulp::x86::V4::try_new().filter(|_| wide) {
+        let data = (input, weights, bias);
+        let done = match (g.k_h, g.k_w) {
+            (3, 3) => wide16::planes_s2::<3, 9>(simd, g, data, output, &mut scratch.windows),
+            (5, 5) => wide16::planes_s2::<5, 25>(simd, g, data, output, &mut scratch.windows),
+            _ => false,
+        };
+        if done {
+            return true;
+        }
     }
     let (hq, wq) = (g.phase_h(), g.phase_w());
     let (sh, sw) = (g.stride_h, g.stride_w);
@@ -415,6 +448,7 @@ const LANES: usize = 16;
 #[cfg(target_arch = "x86_64")]
 mod wide16 {
     use super::LANES;
+    use core::arch::x86_64::{__m512, __m512i};
     use pulp::x86::V4;
     use pulp::{f32x16, Simd};
 
@@ -541,6 +575,139 @@ mod wide16 {
                             dst.copy_from_slice(&pulp::cast::<f32x16, [f32; LANES]>(*acc));
                         } else if let Some(dst) = out.get_mut(o..o + n) {
                             simd.partial_store_f32s(dst, *acc);
+                        }
+                    }
+                }
+            },
+        );
+        true
+    }
+
+    /// A whole depthwise convolution for a `K × K` kernel at stride 2 in both directions
+    /// (`T` = `K²` taps), read from the input planes where they lie: per output row and
+    /// 16-value block, from the bias, `o + (((w₀·a + w₁·b) + …) + w_{K−1}·z)` kernel row after
+    /// kernel row, the sum [`channel`] takes over the phase split (the same bits: taps
+    /// outside the input are zeros there and here), without the split's copy, the wide rows
+    /// and the copy of their valid columns.
+    ///
+    /// A kernel row's taps for 16 outputs are every other input value from column
+    /// `2·ox₀ − pad_left + kx` on: the even and odd lanes of two adjacent 16-value loads (one
+    /// permute each), a load pair per two taps. At a row's ends the loads start at the
+    /// nearest place inside the row, the permute shifted by the difference and the lanes it
+    /// would take from outside the row zeroed (its mask); the windows are placed once per
+    /// call ([`super::Window`]). `false` (nothing done, the caller takes the phase split) for
+    /// another geometry, rows shorter than two loads (32 values) or mismatched sizes.
+    pub(super) fn planes_s2<const K: usize, const T: usize>(
+        simd: V4,
+        g: &super::Geometry,
+        (input, weights, bias): (&[f32], &[f32], &[f32]),
+        output: &mut [f32],
+        windows: &mut Vec<super::Window>,
+    ) -> bool {
+        if K * K != T
+            || (g.k_h, g.k_w, g.stride_h, g.stride_w) != (K, K, 2, 2)
+            || input.len() != g.channels * g.in_plane()
+            || weights.len() != g.channels * T
+            || bias.len() != g.channels
+            || output.len() != g.channels * g.out_plane()
+            || g.in_w < 2 * LANES
+        {
+            return false;
+        }
+        let (in_w, out_w) = (g.in_w, g.out_w);
+        let pairs = K.div_ceil(2);
+        let across = out_w.div_ceil(LANES);
+        // Per block and tap pair (taps 2j and 2j + 1 read from column 2·x₀ − pad_left + 2j
+        // on): where its two loads start (inside the row: at the row's ends the nearest such
+        // start) and, per parity, the permute's lanes and the lanes kept (those reading
+        // inside the row); the same for every channel and row.
+        windows.clear();
+        for b in 0..across {
+            for j in 0..pairs {
+                let at = (2 * b * LANES + 2 * j) as isize - g.pad_left as isize;
+                let base = at.clamp(0, (in_w - 2 * LANES) as isize);
+                let lanes = |odd: isize| {
+                    let idx = std::array::from_fn(|i| (2 * i as isize + odd + at - base) as u32);
+                    let keep = (0..LANES).filter(|&i| idx[i] < 2 * LANES as u32);
+                    (idx, keep.fold(0u16, |k, i| k | (1 << i)))
+                };
+                let ((even, keep_even), (odd, keep_odd)) = (lanes(0), lanes(1));
+                windows.push(super::Window {
+                    base: base as usize,
+                    even,
+                    odd,
+                    keep: [keep_even, keep_odd],
+                });
+            }
+        }
+        let windows = &windows[..];
+        let (in_h, out_h) = (g.in_h, g.out_h);
+        simd.vectorize(
+            #[inline(always)]
+            || {
+                let f = simd.avx512f;
+                let zero = simd.splat_f32s(0.0);
+                for c in 0..g.channels {
+                    let plane = &input[c * in_h * in_w..(c + 1) * in_h * in_w];
+                    let kernel = &weights[c * T..(c + 1) * T];
+                    let out = &mut output[c * out_h * out_w..(c + 1) * out_h * out_w];
+                    let w: [f32x16; T] = std::array::from_fn(|t| simd.splat_f32s(kernel[t]));
+                    for (b, win) in windows.chunks_exact(pairs).enumerate() {
+                        let x0 = b * LANES;
+                        let n = (out_w - x0).min(LANES);
+                        // The block's windows, kept in registers across its rows.
+                        let at = |j: usize| &win[j.min(pairs - 1)];
+                        let base: [usize; K] = std::array::from_fn(|j| at(j).base);
+                        let keep: [[u16; 2]; K] = std::array::from_fn(|j| at(j).keep);
+                        let idx: [[__m512i; 2]; K] = std::array::from_fn(|j| {
+                            [pulp::cast(at(j).even), pulp::cast(at(j).odd)]
+                        });
+                        for oy in 0..out_h {
+                            let mut acc = simd.splat_f32s(bias[c]);
+                            for ky in 0..K {
+                                let y = (2 * oy + ky).checked_sub(g.pad_top).filter(|&y| y < in_h);
+                                let mut taps = [zero; K];
+                                if let Some(row) =
+                                    y.and_then(|y| plane.get(y * in_w..(y + 1) * in_w))
+                                {
+                                    for j in 0..pairs {
+                                        let v =
+                                            row.get(base[j]..).and_then(|v| v.first_chunk::<32>());
+                                        let Some(v) = v else {
+                                            continue;
+                                        };
+                                        let (lo, hi) = v.split_at(LANES);
+                                        let lo = lo.first_chunk().unwrap_or(&[0.0; LANES]);
+                                        let hi = hi.first_chunk().unwrap_or(&[0.0; LANES]);
+                                        let (lo, hi) = (
+                                            pulp::cast::<_, __m512>(*lo),
+                                            pulp::cast::<_, __m512>(*hi),
+                                        );
+                                        for odd in 0..2 {
+                                            if let Some(t) = taps.get_mut(2 * j + odd) {
+                                                *t = pulp::cast(f._mm512_maskz_permutex2var_ps(
+                                                    keep[j][odd],
+                                                    lo,
+                                                    idx[j][odd],
+                                                    hi,
+                                                ));
+                                            }
+                                        }
+                                    }
+                                }
+                                let r = ky * K;
+                                let mut t = simd.mul_f32s(w[r], taps[0]);
+                                for kx in 1..K {
+                                    t = simd.add_f32s(t, simd.mul_f32s(w[r + kx], taps[kx]));
+                                }
+                                acc = simd.add_f32s(acc, t);
+                            }
+                            let d = &mut out[oy * out_w + x0..oy * out_w + x0 + n];
+                            if n == LANES {
+                                d.copy_from_slice(&pulp::cast::<f32x16, [f32; LANES]>(acc));
+                            } else {
+                                simd.partial_store_f32s(d, acc);
+                            }
                         }
                     }
                 }
@@ -842,6 +1009,55 @@ mod tests {
                 "{g:?}: an output not written"
             );
         }
+    }
+
+    /// The stride-2 planes read in place ([`wide16::planes_s2`], where the CPU has AVX-512)
+    /// against the phase split's narrow rows: the same bits at every padding a kernel takes,
+    /// on sizes whose rows take one block or several, end mid-block, or are shorter than the
+    /// kernel's reach (loads before a row's start, past its end, rows of padding).
+    #[test]
+    fn the_stride_2_planes_give_the_phase_split_bits() {
+        let (mut wide, mut narrow) = (Scratch::default(), Scratch::default());
+        let mut cases = 0u32;
+        let sizes = [
+            (128, 128),
+            (64, 64),
+            (32, 32),
+            (24, 24),
+            (16, 16),
+            (19, 21),
+            (33, 47),
+            (5, 70),
+            (3, 2),
+        ];
+        for &(h, w) in &sizes {
+            for &k in &[3usize, 5] {
+                for &(pt, pb, pl, pr) in &[
+                    (k / 2, k / 2, k / 2, k / 2),
+                    (0, 0, 0, 0),
+                    (k - 1, k - 1, k - 1, k - 1),
+                    (1, 0, k - 1, 0),
+                ] {
+                    let g = Geometry::new(2, (h, w), (k, k), (2, 2), (pt, pb), (pl, pr));
+                    let Some(g) = g else {
+                        continue;
+                    };
+                    let input = values(2 * h * w, cases);
+                    let weights = values(2 * k * k, cases + 1000);
+                    let bias = values(2, cases + 2000);
+                    let mut a = vec![f32::NAN; 2 * g.out_plane()];
+                    let mut b = vec![f32::NAN; 2 * g.out_plane()];
+                    let d = |o: &mut Vec<f32>, s: &mut Scratch, on: bool| {
+                        depthwise_rows(&g, &input, &weights, &bias, o, s, on)
+                    };
+                    assert!(d(&mut a, &mut wide, true) && d(&mut b, &mut narrow, false));
+                    let same = a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits());
+                    assert!(same, "{g:?}: the stride-2 planes' bits differ");
+                    cases += 1;
+                }
+            }
+        }
+        assert!(cases >= 50, "{cases} cases");
     }
 
     #[test]
