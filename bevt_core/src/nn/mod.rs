@@ -1024,6 +1024,10 @@ impl Runner {
                             continue; // the activation is applied
                         }
                         ConvKind::Rows => {
+                            // At stride 2 straight from the input rows where it can.
+                            if ops::conv_s2(s, weights, xi, bias, *act, yi, &mut self.dw) {
+                                continue; // the activation is applied
+                            }
                             let k = s.c * s.kh * s.kw;
                             let col = &mut self.col[..k * s.ow];
                             for oy in 0..s.oh {

@@ -627,7 +627,8 @@ fn rows_product_narrow(
 /// [`rows_product`]'s AVX-512 kernel, in safe code through pulp's `x86::V4`.
 #[cfg(target_arch = "x86_64")]
 mod wide {
-    use super::{apply_in_place, Unary, BLOCK_M};
+    use super::{apply_in_place, ConvShape, Unary, BLOCK_M};
+    use crate::redetect::dwconv::{wide16::Taps2, Window};
     use pulp::x86::V4;
     use pulp::{f32x16, Simd};
 
@@ -725,6 +726,113 @@ mod wide {
         );
         n
     }
+
+    /// A one-group `K × K` convolution at stride 2 (NanoTrack's first layer: 3 × 3 from the
+    /// RGB crop) straight from the input planes, one output row at a time: per 16-output
+    /// block and 8 output channels, `Σ_p w[i][p] · x_p` fused-multiply-added over the taps
+    /// `p = (c·K + ky)·K + kx` in order from zero, then the bias, then `act` on the stored
+    /// row: what [`super::im2col_row`] and [`rows_product`] compute (the same bits), without
+    /// writing the im2col rows. Each kernel row's taps are the even and odd lanes of two
+    /// loads from the input row ([`Taps2`], `windows` from
+    /// [`crate::redetect::dwconv::place_s2`]), zeros outside the input. `false` (nothing
+    /// done) for another geometry or mismatched sizes.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn conv_s2<const K: usize>(
+        s: &ConvShape,
+        wp: &[f32],
+        x: &[f32],
+        bias: &[f32],
+        act: Option<Unary>,
+        y: &mut [f32],
+        windows: &[Window],
+    ) -> bool {
+        let (k, plane) = (s.c * K * K, s.oh * s.ow);
+        let (across, pairs) = (s.ow.div_ceil(N), K.div_ceil(2));
+        let Some(simd) = V4::try_new() else {
+            return false;
+        };
+        if (s.kh, s.kw, s.sh, s.sw, s.groups) != (K, K, 2, 2, 1)
+            || s.w < 2 * N
+            || x.len() != s.c * s.h * s.w
+            || y.len() != s.m * plane
+            || bias.len() != s.m
+            || wp.len() != s.m.div_ceil(BLOCK_M) * k * BLOCK_M
+            || windows.len() != across * pairs
+            || k == 0
+        {
+            return false;
+        }
+        simd.vectorize(
+            #[inline(always)]
+            || {
+                let zero = simd.splat_f32s(0.0);
+                for oy in 0..s.oh {
+                    let rows: [Option<usize>; K] = std::array::from_fn(|ky| {
+                        (2 * oy + ky).checked_sub(s.pt).filter(|&r| r < s.h)
+                    });
+                    for (b, win) in windows.chunks_exact(pairs).enumerate() {
+                        let (x0, n) = (b * N, (s.ow - b * N).min(N));
+                        let taps_of = Taps2::<K>::new(win);
+                        for (blk, wb) in wp.chunks_exact(k * BLOCK_M).enumerate() {
+                            let i0 = blk * BLOCK_M;
+                            let mut acc = [zero; BLOCK_M];
+                            let mut ws = wb.chunks_exact(BLOCK_M);
+                            for src in x.chunks_exact(s.h * s.w) {
+                                for &r in &rows {
+                                    let row = r.and_then(|r| src.get(r * s.w..(r + 1) * s.w));
+                                    let taps = row.map_or([zero; K], |row| taps_of.row(simd, row));
+                                    for tap in taps {
+                                        let Some(w) = ws.next() else {
+                                            continue;
+                                        };
+                                        for (a, &w) in acc.iter_mut().zip(w) {
+                                            *a = simd.mul_add_e_f32s(simd.splat_f32s(w), tap, *a);
+                                        }
+                                    }
+                                }
+                            }
+                            let rows_here = BLOCK_M.min(s.m - i0);
+                            for (i, a) in acc.iter().enumerate().take(rows_here) {
+                                let v = simd.add_f32s(*a, simd.splat_f32s(bias[i0 + i]));
+                                let at = (i0 + i) * plane + oy * s.ow + x0;
+                                if let Some(d) = y.get_mut(at..at + n) {
+                                    simd.partial_store_f32s(d, v);
+                                }
+                            }
+                        }
+                    }
+                    if let Some(f) = act {
+                        for i in 0..s.m {
+                            let at = i * plane + oy * s.ow;
+                            apply_in_place(f, &mut y[at..at + s.ow]);
+                        }
+                    }
+                }
+            },
+        );
+        true
+    }
+}
+
+/// [`wide::conv_s2`] for 3 × 3 kernels where the CPU has AVX-512: `false` (nothing done,
+/// the caller takes [`im2col_row`] and [`rows_product`]) elsewhere or for other shapes.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn conv_s2(
+    s: &ConvShape,
+    wp: &[f32],
+    x: &[f32],
+    bias: &[f32],
+    act: Option<Unary>,
+    y: &mut [f32],
+    scratch: &mut crate::redetect::dwconv::Scratch,
+) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if s.kh == 3 && s.kw == 3 && s.sh == 2 && s.sw == 2 && s.w >= 32 {
+        let windows = scratch.windows_s2(s.w, s.ow, 3, s.pl);
+        return wide::conv_s2::<3>(s, wp, x, bias, act, y, windows);
+    }
+    let _ = (s, wp, x, bias, act, y, scratch);
+    false
 }
 
 /// Fills each of `y`'s `rows` rows of `len` values with its bias.
@@ -823,5 +931,81 @@ mod tests {
             }
         }
         println!("AVX-512 kernel ran: {avx512}");
+    }
+
+    /// The stride-2 convolution read from the input rows ([`conv_s2`], where the CPU has
+    /// AVX-512) against the im2col rows and [`rows_product`] the runner takes otherwise: the
+    /// same bits on NanoTrack's first layer (3 → 16 channels on 255 and 127 px crops) and on
+    /// ragged shapes (a partial channel block, rows ending mid-block, every padding a 3 × 3
+    /// kernel takes), with and without an activation. On a CPU without AVX-512 it must
+    /// refuse (nothing to compare).
+    #[test]
+    fn the_stride_2_rows_give_the_im2col_rows_bits() {
+        #[cfg(target_arch = "x86_64")]
+        let avx512 = std::arch::is_x86_feature_detected!("avx512f");
+        #[cfg(not(target_arch = "x86_64"))]
+        let avx512 = false;
+        let mut seed = 5u32;
+        let mut rnd = move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32 - 0.5
+        };
+        let mut cases = 0;
+        let mut scratch = crate::redetect::dwconv::Scratch::default();
+        for (c, m, h, w, (pt, pb), (pl, pr)) in [
+            (3, 16, 255, 255, (1, 1), (1, 1)),
+            (3, 16, 127, 127, (1, 1), (1, 1)),
+            (2, 5, 40, 33, (0, 0), (0, 0)),
+            (1, 11, 9, 64, (2, 2), (2, 2)),
+            (4, 8, 33, 47, (0, 2), (2, 0)),
+        ] {
+            let (oh, ow) = ((h + pt + pb - 3) / 2 + 1, (w + pl + pr - 3) / 2 + 1);
+            let s = ConvShape {
+                c,
+                h,
+                w,
+                m,
+                oh,
+                ow,
+                kh: 3,
+                kw: 3,
+                sh: 2,
+                sw: 2,
+                pt,
+                pl,
+                groups: 1,
+            };
+            let k = c * 9;
+            let wts: Vec<f32> = (0..m * k).map(|_| rnd()).collect();
+            let x: Vec<f32> = (0..c * h * w).map(|_| rnd()).collect();
+            let bias: Vec<f32> = (0..m).map(|_| rnd()).collect();
+            let wp = pack_rows(&wts, m, k);
+            for act in [None, Some(Unary::Relu), Some(Unary::HardSwish)] {
+                let plane = oh * ow;
+                let mut want = vec![f32::NAN; m * plane];
+                let mut col = vec![0.0; k * ow];
+                for oy in 0..oh {
+                    im2col_row(&s, &x, oy, &mut col);
+                    let yo = &mut want[oy * ow..];
+                    rows_product((m, k, ow), &wp, &col, ow, &bias, act, yo, plane);
+                }
+                let mut got = vec![f32::NAN; m * plane];
+                let done = conv_s2(&s, &wp, &x, &bias, act, &mut got, &mut scratch);
+                assert_eq!(done, avx512, "{c}×{h}×{w}: ran {done}");
+                if !done {
+                    continue;
+                }
+                let bits = |v: &[f32]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(
+                    bits(&got),
+                    bits(&want),
+                    "{c}×{h}×{w} → {m}, pads {pt} {pl}, {act:?}"
+                );
+                cases += 1;
+            }
+        }
+        if avx512 {
+            assert_eq!(cases, 15);
+        }
     }
 }

@@ -157,11 +157,62 @@ pub struct Scratch {
 /// zeros).
 #[derive(Debug, Clone, Copy)]
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // read by the AVX-512 rows only
-struct Window {
+pub(crate) struct Window {
     base: usize,
     even: [u32; LANES],
     odd: [u32; LANES],
     keep: [u16; 2],
+}
+
+/// Places the windows of a stride-2 `k`-wide kernel over rows of `in_w ≥ 32` values with
+/// `pad_left` zeros before them, for `out_w` outputs a row: per 16-output block and tap pair
+/// (taps `2j` and `2j + 1` read every other value from column `2·x₀ − pad_left + 2j` on)
+/// where its two loads start (inside the row; at the row's ends the nearest such start)
+/// and, per parity, the permute's lanes and the lanes kept (those reading inside the row).
+/// The same for every channel and row.
+pub(crate) fn place_s2(
+    windows: &mut Vec<Window>,
+    in_w: usize,
+    out_w: usize,
+    k: usize,
+    pad_left: usize,
+) {
+    windows.clear();
+    let last = in_w.saturating_sub(2 * LANES) as isize;
+    for b in 0..out_w.div_ceil(LANES) {
+        for j in 0..k.div_ceil(2) {
+            let at = (2 * b * LANES + 2 * j) as isize - pad_left as isize;
+            let base = at.clamp(0, last);
+            let lanes = |odd: isize| {
+                let idx: [u32; LANES] =
+                    std::array::from_fn(|i| (2 * i as isize + odd + at - base) as u32);
+                let keep = (0..LANES).filter(|&i| idx[i] < 2 * LANES as u32);
+                (idx, keep.fold(0u16, |k, i| k | (1 << i)))
+            };
+            let ((even, keep_even), (odd, keep_odd)) = (lanes(0), lanes(1));
+            windows.push(Window {
+                base: base as usize,
+                even,
+                odd,
+                keep: [keep_even, keep_odd],
+            });
+        }
+    }
+}
+
+impl Scratch {
+    /// [`place_s2`]'s windows, in this scratch's buffer.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // the AVX-512 rows' only
+    pub(crate) fn windows_s2(
+        &mut self,
+        in_w: usize,
+        out_w: usize,
+        k: usize,
+        pl: usize,
+    ) -> &[Window] {
+        place_s2(&mut self.windows, in_w, out_w, k, pl);
+        &self.windows
+    }
 }
 
 /// Depthwise convolution of `input` (`channels` planes of `in_h × in_w`, row-major) with
@@ -446,7 +497,7 @@ const LANES: usize = 16;
 /// (detected at run time): each value the same multiplies and adds in the same order, so the
 /// same bits. The slices hold whole blocks (the wide buffer is padded to [`LANES`]).
 #[cfg(target_arch = "x86_64")]
-mod wide16 {
+pub(crate) mod wide16 {
     use super::LANES;
     use core::arch::x86_64::{__m512, __m512i};
     use pulp::x86::V4;
@@ -583,6 +634,50 @@ mod wide16 {
         true
     }
 
+    /// One output block's `K` taps at stride 2 from an input row, the block's windows
+    /// ([`super::place_s2`]) held in registers: per tap pair two 16-value loads from the
+    /// window's base and one masked permute per tap (the lanes reading outside the row are
+    /// zeros).
+    pub(crate) struct Taps2<const K: usize> {
+        base: [usize; K],
+        keep: [[u16; 2]; K],
+        idx: [[__m512i; 2]; K],
+    }
+
+    impl<const K: usize> Taps2<K> {
+        /// The block's windows: `win` holds its `K.div_ceil(2)` pairs.
+        #[inline(always)]
+        pub(crate) fn new(win: &[super::Window]) -> Self {
+            let at = |j: usize| &win[j.min(win.len().saturating_sub(1))];
+            Self {
+                base: std::array::from_fn(|j| at(j).base),
+                keep: std::array::from_fn(|j| at(j).keep),
+                idx: std::array::from_fn(|j| [pulp::cast(at(j).even), pulp::cast(at(j).odd)]),
+            }
+        }
+
+        /// Tap `kx`'s 16 values of `row` (one input row, at least 32 values) for the block.
+        #[inline(always)]
+        pub(crate) fn row(&self, simd: V4, row: &[f32]) -> [f32x16; K] {
+            let mut taps = [simd.splat_f32s(0.0); K];
+            for j in 0..K.div_ceil(2) {
+                let Some(v) = row.get(self.base[j]..).and_then(|v| v.first_chunk::<32>()) else {
+                    continue;
+                };
+                let (lo, hi) = v.split_at(LANES);
+                let lo = pulp::cast::<_, __m512>(*lo.first_chunk().unwrap_or(&[0.0; LANES]));
+                let hi = pulp::cast::<_, __m512>(*hi.first_chunk().unwrap_or(&[0.0; LANES]));
+                for odd in 0..2 {
+                    if let Some(t) = taps.get_mut(2 * j + odd) {
+                        let (k, i) = (self.keep[j][odd], self.idx[j][odd]);
+                        *t = pulp::cast(simd.avx512f._mm512_maskz_permutex2var_ps(k, lo, i, hi));
+                    }
+                }
+            }
+            taps
+        }
+    }
+
     /// A whole depthwise convolution for a `K × K` kernel at stride 2 in both directions
     /// (`T` = `K²` taps), read from the input planes where they lie: per output row and
     /// 16-value block, from the bias, `o + (((w₀·a + w₁·b) + …) + w_{K−1}·z)` kernel row after
@@ -616,36 +711,12 @@ mod wide16 {
         }
         let (in_w, out_w) = (g.in_w, g.out_w);
         let pairs = K.div_ceil(2);
-        let across = out_w.div_ceil(LANES);
-        // Per block and tap pair (taps 2j and 2j + 1 read from column 2·x₀ − pad_left + 2j
-        // on): where its two loads start (inside the row: at the row's ends the nearest such
-        // start) and, per parity, the permute's lanes and the lanes kept (those reading
-        // inside the row); the same for every channel and row.
-        windows.clear();
-        for b in 0..across {
-            for j in 0..pairs {
-                let at = (2 * b * LANES + 2 * j) as isize - g.pad_left as isize;
-                let base = at.clamp(0, (in_w - 2 * LANES) as isize);
-                let lanes = |odd: isize| {
-                    let idx = std::array::from_fn(|i| (2 * i as isize + odd + at - base) as u32);
-                    let keep = (0..LANES).filter(|&i| idx[i] < 2 * LANES as u32);
-                    (idx, keep.fold(0u16, |k, i| k | (1 << i)))
-                };
-                let ((even, keep_even), (odd, keep_odd)) = (lanes(0), lanes(1));
-                windows.push(super::Window {
-                    base: base as usize,
-                    even,
-                    odd,
-                    keep: [keep_even, keep_odd],
-                });
-            }
-        }
+        super::place_s2(windows, in_w, out_w, K, g.pad_left);
         let windows = &windows[..];
         let (in_h, out_h) = (g.in_h, g.out_h);
         simd.vectorize(
             #[inline(always)]
             || {
-                let f = simd.avx512f;
                 let zero = simd.splat_f32s(0.0);
                 for c in 0..g.channels {
                     let plane = &input[c * in_h * in_w..(c + 1) * in_h * in_w];
@@ -656,45 +727,13 @@ mod wide16 {
                         let x0 = b * LANES;
                         let n = (out_w - x0).min(LANES);
                         // The block's windows, kept in registers across its rows.
-                        let at = |j: usize| &win[j.min(pairs - 1)];
-                        let base: [usize; K] = std::array::from_fn(|j| at(j).base);
-                        let keep: [[u16; 2]; K] = std::array::from_fn(|j| at(j).keep);
-                        let idx: [[__m512i; 2]; K] = std::array::from_fn(|j| {
-                            [pulp::cast(at(j).even), pulp::cast(at(j).odd)]
-                        });
+                        let taps_of = Taps2::<K>::new(win);
                         for oy in 0..out_h {
                             let mut acc = simd.splat_f32s(bias[c]);
                             for ky in 0..K {
                                 let y = (2 * oy + ky).checked_sub(g.pad_top).filter(|&y| y < in_h);
-                                let mut taps = [zero; K];
-                                if let Some(row) =
-                                    y.and_then(|y| plane.get(y * in_w..(y + 1) * in_w))
-                                {
-                                    for j in 0..pairs {
-                                        let v =
-                                            row.get(base[j]..).and_then(|v| v.first_chunk::<32>());
-                                        let Some(v) = v else {
-                                            continue;
-                                        };
-                                        let (lo, hi) = v.split_at(LANES);
-                                        let lo = lo.first_chunk().unwrap_or(&[0.0; LANES]);
-                                        let hi = hi.first_chunk().unwrap_or(&[0.0; LANES]);
-                                        let (lo, hi) = (
-                                            pulp::cast::<_, __m512>(*lo),
-                                            pulp::cast::<_, __m512>(*hi),
-                                        );
-                                        for odd in 0..2 {
-                                            if let Some(t) = taps.get_mut(2 * j + odd) {
-                                                *t = pulp::cast(f._mm512_maskz_permutex2var_ps(
-                                                    keep[j][odd],
-                                                    lo,
-                                                    idx[j][odd],
-                                                    hi,
-                                                ));
-                                            }
-                                        }
-                                    }
-                                }
+                                let row = y.and_then(|y| plane.get(y * in_w..(y + 1) * in_w));
+                                let taps = row.map_or([zero; K], |row| taps_of.row(simd, row));
                                 let r = ky * K;
                                 let mut t = simd.mul_f32s(w[r], taps[0]);
                                 for kx in 1..K {
