@@ -736,14 +736,10 @@ mod wide {
     /// loads from the input row ([`Taps2`], `windows` from
     /// [`crate::redetect::dwconv::place_s2`]), zeros outside the input. `false` (nothing
     /// done) for another geometry or mismatched sizes.
-    #[allow(clippy::too_many_arguments)]
     pub(super) fn conv_s2<const K: usize>(
         s: &ConvShape,
-        wp: &[f32],
-        x: &[f32],
-        bias: &[f32],
-        act: Option<Unary>,
-        y: &mut [f32],
+        (x, wp, bias): (&[f32], &[f32], &[f32]),
+        (act, y): (Option<Unary>, &mut [f32]),
         windows: &[Window],
     ) -> bool {
         let (k, plane) = (s.c * K * K, s.oh * s.ow);
@@ -829,7 +825,7 @@ pub(super) fn conv_s2(
     #[cfg(target_arch = "x86_64")]
     if s.kh == 3 && s.kw == 3 && s.sh == 2 && s.sw == 2 && s.w >= 32 {
         let windows = scratch.windows_s2(s.w, s.ow, 3, s.pl);
-        return wide::conv_s2::<3>(s, wp, x, bias, act, y, windows);
+        return wide::conv_s2::<3>(s, (x, wp, bias), (act, y), windows);
     }
     let _ = (s, wp, x, bias, act, y, scratch);
     false
