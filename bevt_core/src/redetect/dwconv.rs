@@ -252,10 +252,14 @@ fn depthwise_rows(
     {
         return false;
     }
+    #[cfg(target_arch = "x86_64")]
+    let v4 = pulp::x86::V4::try_new().filter(|_| wide);
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = wide;
     // Square kernels at stride 2 on AVX-512 read the input planes where they lie: no
     // phase split, no wide rows ([`wide16::planes_s2`]).
     #[cfg(target_arch = "x86_64")]
-    if let Some(simd) = pulp::x86::V4::try_new().filter(|_| wide) {
+    if let Some(simd) = v4 {
         let data = (input, weights, bias);
         let done = match (g.k_h, g.k_w) {
             (3, 3) => wide16::planes_s2::<3, 9>(simd, g, data, output, &mut scratch.windows),
@@ -277,10 +281,6 @@ fn depthwise_rows(
     // windows read up to `2 · LANES + 4` values beyond them (into lanes that are dropped).
     scratch.phases.resize(sh * sw * sub + 2 * LANES + 8, 0.0);
     scratch.wide.resize(span, 0.0);
-    #[cfg(target_arch = "x86_64")]
-    let v4 = pulp::x86::V4::try_new().filter(|_| wide);
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = wide;
     let rows_read = hq * sh;
     let cols_read = wq * sw;
     // Padding and the columns and rows no tap reads stay zero for every channel: each
@@ -1058,6 +1058,8 @@ mod tests {
     fn the_stride_2_planes_give_the_phase_split_bits() {
         let (mut wide, mut narrow) = (Scratch::default(), Scratch::default());
         let mut cases = 0u32;
+        #[cfg_attr(not(target_arch = "x86_64"), allow(unused_mut))] // counted on AVX-512
+        let mut in_place = 0usize;
         let sizes = [
             (128, 128),
             (64, 64),
@@ -1092,11 +1094,28 @@ mod tests {
                     assert!(d(&mut a, &mut wide, true) && d(&mut b, &mut narrow, false));
                     let same = a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits());
                     assert!(same, "{g:?}: the stride-2 planes' bits differ");
+                    // The rows of 32 values or more did take the in-place path.
+                    #[cfg(target_arch = "x86_64")]
+                    if let Some(simd) = pulp::x86::V4::try_new() {
+                        let data = (&input[..], &weights[..], &bias[..]);
+                        let (out, win) = (&mut b[..], &mut wide.windows);
+                        let ran = match k {
+                            3 => wide16::planes_s2::<3, 9>(simd, &g, data, out, win),
+                            _ => wide16::planes_s2::<5, 25>(simd, &g, data, out, win),
+                        };
+                        assert_eq!(ran, w >= 2 * LANES, "{g:?}");
+                        in_place += usize::from(ran);
+                    }
                     cases += 1;
                 }
             }
         }
         assert!(cases >= 50, "{cases} cases");
+        #[cfg(target_arch = "x86_64")]
+        if pulp::x86::V4::try_new().is_some() {
+            assert!(in_place >= 30, "{in_place} shapes in place");
+        }
+        let _ = in_place;
     }
 
     #[test]
