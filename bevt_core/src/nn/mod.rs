@@ -901,7 +901,7 @@ impl Plan {
     /// Puts slots whose lifetimes do not overlap into the same buffer, so that a pass
     /// writes into memory that an earlier step of the same pass used and the cache still
     /// holds, instead of a buffer of its own per tensor (NanoTrack's backbone on a 255-px
-    /// crop: 6.6 MB of tensors, more than a core's L2 cache, so each step's output was
+    /// crop: 7.6 MB of buffers, more than a core's L2 cache, so each step's output was
     /// fetched from L3 or memory before being written). A slot lives from the first step
     /// that references it to the last; constants, inputs and outputs keep buffers of their
     /// own (filled once, handed in by exchange, read after the run). Each slot takes the
