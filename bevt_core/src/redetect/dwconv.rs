@@ -310,6 +310,14 @@ fn depthwise_rows(
             && g.out_h * across <= span / LANES
             && last <= scratch.phases.len()
     });
+    // At both strides 1 the same kernels go to [`wide16::rows_ring`], whose windows start
+    // at each padded row (`p · wq`) and block, the last one ending in the phases' slack.
+    #[cfg(target_arch = "x86_64")]
+    let ring = v4.filter(|_| {
+        let (k, across) = (g.k_w, g.out_w.div_ceil(LANES));
+        let last = (g.out_h + k - 2) * wq + (across - 1) * LANES + LANES + k - 1;
+        g.k_h == k && matches!(k, 3 | 5) && (sh, sw) == (1, 1) && last <= scratch.phases.len()
+    });
     // Where each input row's values go, worked out once for all channels (every channel's
     // plane has the same layout; the divisions by the strides cost more per row than the
     // copies of 12-value rows themselves): per input row its offset in the plane and its
@@ -398,8 +406,21 @@ fn depthwise_rows(
         let kernel = &weights[c * taps..(c + 1) * taps];
         let out = &mut output[c * g.out_plane()..(c + 1) * g.out_plane()];
         // 2. and 3. on AVX-512, for the networks' square kernels: each block summed over
-        //    every kernel row in registers, at stride 1 straight into the output rows where
-        //    that costs no more blocks, else into the wide rows, then their valid columns.
+        //    every kernel row in registers, at stride 1 straight into the output rows (each
+        //    padded row's taps loaded once for the output rows that read them where both
+        //    strides are 1; else where that costs no more blocks), else into the wide rows,
+        //    then their valid columns.
+        #[cfg(target_arch = "x86_64")]
+        if let Some(simd) = ring {
+            let (phases, shape, b) = (&scratch.phases[..], (g.out_h, g.out_w, wq), bias[c]);
+            let done = match g.k_w {
+                3 => wide16::rows_ring::<3, 9, 18>(simd, out, shape, phases, kernel, b),
+                _ => wide16::rows_ring::<5, 25, 20>(simd, out, shape, phases, kernel, b),
+            };
+            if done {
+                continue;
+            }
+        }
         #[cfg(target_arch = "x86_64")]
         if let Some(simd) = direct {
             let (phases, shape, b) = (&scratch.phases[..], (g.out_h, g.out_w, wq), bias[c]);
@@ -627,6 +648,78 @@ pub(crate) mod wide16 {
                         } else if let Some(dst) = out.get_mut(o..o + n) {
                             simd.partial_store_f32s(dst, *acc);
                         }
+                    }
+                }
+            },
+        );
+        true
+    }
+
+    /// [`rows_out`] at stride 1 in both directions, each kernel row's taps loaded once for
+    /// the `K` output rows that read them: per column block, the padded rows in order, each
+    /// row's `K` taps (one window) summed by every kernel row into the output row it belongs
+    /// to (`K` sums in registers, one finished and stored per padded row). Each output is
+    /// the same sum as [`rows_out`]'s, kernel row after kernel row from the bias (the same
+    /// bits), with `K` loads a block instead of `K²`. Phase row `p` starts at `p · wq`.
+    /// `false` when the sizes do not match.
+    pub(super) fn rows_ring<const K: usize, const T: usize, const W: usize>(
+        simd: V4,
+        out: &mut [f32],
+        (out_h, out_w, wq): (usize, usize, usize),
+        phases: &[f32],
+        kernel: &[f32],
+        bias: f32,
+    ) -> bool {
+        if K * K != T
+            || W != LANES + K - 1
+            || kernel.len() != T
+            || out.len() != out_h * out_w
+            || out_h == 0
+            || out_w == 0
+        {
+            return false;
+        }
+        simd.vectorize(
+            #[inline(always)]
+            || {
+                let w: [f32x16; T] = std::array::from_fn(|t| simd.splat_f32s(kernel[t]));
+                let at = |win: &[f32; W], o: usize| -> f32x16 {
+                    let (arrays, _) = pulp::as_arrays::<LANES, f32>(&win[o..o + LANES]);
+                    pulp::cast(arrays[0])
+                };
+                let (zeros, b) = ([0.0; W], simd.splat_f32s(bias));
+                for x in (0..out_w).step_by(LANES) {
+                    let n = (out_w - x).min(LANES);
+                    // `acc[i]`: output row `p + 1 + i − K` while padded row `p` is summed in
+                    // (kernel row `K − 1 − i` of it); rows outside the output are summed and
+                    // dropped.
+                    let mut acc = [simd.splat_f32s(0.0); K];
+                    for p in 0..out_h + K - 1 {
+                        let s = p * wq + x;
+                        let win = phases.get(s..s + W).and_then(|v| v.first_chunk::<W>());
+                        let win = win.unwrap_or(&zeros);
+                        let taps: [f32x16; K] = std::array::from_fn(|kx| at(win, kx));
+                        for (i, a) in acc.iter_mut().enumerate() {
+                            let r = (K - 1 - i) * K;
+                            let mut t = simd.mul_f32s(w[r], taps[0]);
+                            for kx in 1..K {
+                                t = simd.add_f32s(t, simd.mul_f32s(w[r + kx], taps[kx]));
+                            }
+                            *a = simd.add_f32s(if i + 1 == K { b } else { *a }, t);
+                        }
+                        if let Some(oy) = (p + 1).checked_sub(K) {
+                            let o = oy * out_w + x;
+                            if let Some(dst) = out.get_mut(o..o + n) {
+                                if n == LANES {
+                                    dst.copy_from_slice(&pulp::cast::<f32x16, [f32; LANES]>(
+                                        acc[0],
+                                    ));
+                                } else {
+                                    simd.partial_store_f32s(dst, acc[0]);
+                                }
+                            }
+                        }
+                        acc = std::array::from_fn(|i| acc[(i + 1) % K]);
                     }
                 }
             },
@@ -1116,6 +1209,56 @@ mod tests {
             assert!(in_place >= 30, "{in_place} shapes in place");
         }
         let _ = in_place;
+    }
+
+    /// The stride-1 rows that load each padded row's taps once ([`wide16::rows_ring`], where
+    /// the CPU has AVX-512) against the narrow rows: the same bits at every padding a kernel
+    /// takes, on NanoTrack's 16 × 16 and 32 × 32 maps and on rows that end mid-block, take
+    /// several blocks, or are shorter than the kernel (rows and columns of padding only).
+    #[test]
+    fn the_stride_1_ring_gives_the_narrow_rows_bits() {
+        let (mut wide, mut narrow) = (Scratch::default(), Scratch::default());
+        let mut cases = 0u32;
+        let sizes = [
+            (16, 16),
+            (32, 32),
+            (8, 8),
+            (12, 12),
+            (17, 33),
+            (5, 70),
+            (40, 3),
+            (3, 2),
+            (1, 1),
+        ];
+        for &(h, w) in &sizes {
+            for &k in &[3usize, 5] {
+                for &(pt, pb, pl, pr) in &[
+                    (k / 2, k / 2, k / 2, k / 2),
+                    (0, 0, 0, 0),
+                    (k - 1, k - 1, k - 1, k - 1),
+                    (1, 0, k - 1, 0),
+                    (0, k - 1, 0, 1),
+                ] {
+                    let g = Geometry::new(3, (h, w), (k, k), (1, 1), (pt, pb), (pl, pr));
+                    let Some(g) = g else {
+                        continue;
+                    };
+                    let input = values(3 * h * w, cases);
+                    let weights = values(3 * k * k, cases + 1000);
+                    let bias = values(3, cases + 2000);
+                    let mut a = vec![f32::NAN; 3 * g.out_plane()];
+                    let mut b = vec![f32::NAN; 3 * g.out_plane()];
+                    let d = |o: &mut Vec<f32>, s: &mut Scratch, on: bool| {
+                        depthwise_rows(&g, &input, &weights, &bias, o, s, on)
+                    };
+                    assert!(d(&mut a, &mut wide, true) && d(&mut b, &mut narrow, false));
+                    let same = a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits());
+                    assert!(same, "{g:?}: the ring's bits differ");
+                    cases += 1;
+                }
+            }
+        }
+        assert!(cases >= 60, "{cases} cases");
     }
 
     #[test]
