@@ -816,30 +816,55 @@ pub(crate) mod wide16 {
                     let kernel = &weights[c * T..(c + 1) * T];
                     let out = &mut output[c * out_h * out_w..(c + 1) * out_h * out_w];
                     let w: [f32x16; T] = std::array::from_fn(|t| simd.splat_f32s(kernel[t]));
+                    let bias_v = simd.splat_f32s(bias[c]);
                     for (b, win) in windows.chunks_exact(pairs).enumerate() {
                         let x0 = b * LANES;
                         let n = (out_w - x0).min(LANES);
                         // The block's windows, kept in registers across its rows.
                         let taps_of = Taps2::<K>::new(win);
-                        for oy in 0..out_h {
-                            let mut acc = simd.splat_f32s(bias[c]);
-                            for ky in 0..K {
-                                let y = (2 * oy + ky).checked_sub(g.pad_top).filter(|&y| y < in_h);
-                                let row = y.and_then(|y| plane.get(y * in_w..(y + 1) * in_w));
-                                let taps = row.map_or([zero; K], |row| taps_of.row(simd, row));
-                                let r = ky * K;
-                                let mut t = simd.mul_f32s(w[r], taps[0]);
-                                for kx in 1..K {
-                                    t = simd.add_f32s(t, simd.mul_f32s(w[r + kx], taps[kx]));
+                        // Padded row `p`'s taps (zeros outside the input) and kernel row
+                        // `ky`'s sum of them.
+                        let taps = |p: usize| {
+                            let y = p.checked_sub(g.pad_top).filter(|&y| y < in_h);
+                            let row = y.and_then(|y| plane.get(y * in_w..(y + 1) * in_w));
+                            row.map_or([zero; K], |row| taps_of.row(simd, row))
+                        };
+                        let sum = |taps: &[f32x16; K], ky: usize| {
+                            let r = ky * K;
+                            let mut t = simd.mul_f32s(w[r], taps[0]);
+                            for kx in 1..K {
+                                t = simd.add_f32s(t, simd.mul_f32s(w[r + kx], taps[kx]));
+                            }
+                            t
+                        };
+                        // Each padded row's taps are worked out once for the output rows
+                        // that read them: `s[i]` is output row `q − i` while padded rows
+                        // `2q` and `2q + 1` are summed in (its kernel rows `2i` and
+                        // `2i + 1`); row `q + 1 − live` is then finished. Rows outside the
+                        // output are summed and dropped.
+                        let live = K.div_ceil(2);
+                        let mut s = [zero; K];
+                        for q in 0..out_h + live - 1 {
+                            for parity in 0..2 {
+                                let taps = taps(2 * q + parity);
+                                for (i, acc) in s.iter_mut().enumerate().take(live) {
+                                    let ky = 2 * i + parity;
+                                    if ky < K {
+                                        let from = if ky == 0 { bias_v } else { *acc };
+                                        *acc = simd.add_f32s(from, sum(&taps, ky));
+                                    }
                                 }
-                                acc = simd.add_f32s(acc, t);
                             }
-                            let d = &mut out[oy * out_w + x0..oy * out_w + x0 + n];
-                            if n == LANES {
-                                d.copy_from_slice(&pulp::cast::<f32x16, [f32; LANES]>(acc));
-                            } else {
-                                simd.partial_store_f32s(d, acc);
+                            if let Some(oy) = (q + 1).checked_sub(live).filter(|&y| y < out_h) {
+                                let d = &mut out[oy * out_w + x0..oy * out_w + x0 + n];
+                                let acc = s[live - 1];
+                                if n == LANES {
+                                    d.copy_from_slice(&pulp::cast::<f32x16, [f32; LANES]>(acc));
+                                } else {
+                                    simd.partial_store_f32s(d, acc);
+                                }
                             }
+                            s = std::array::from_fn(|i| if i == 0 { zero } else { s[i - 1] });
                         }
                     }
                 }
