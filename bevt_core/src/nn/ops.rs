@@ -441,6 +441,10 @@ pub(super) fn im2col_row(s: &ConvShape, x: &[f32], oy: usize, col: &mut [f32]) {
 pub(super) const BLOCK_M: usize = 8;
 /// Output columns per step of [`rows_product`].
 const BLOCK_N: usize = 8;
+/// Output columns per step of [`rows_product`]'s AVX2 clone, [`HALF_M`] rows at a time.
+const WIDE_N: usize = 16;
+/// Half a block of rows.
+const HALF_M: usize = BLOCK_M / 2;
 
 /// Columns of the input a 1 × 1 convolution copies together for [`rows_product`]: about
 /// 16 KB of input (`k` rows), in whole blocks of 32 (the AVX-512 kernel's widest step), at
@@ -580,30 +584,26 @@ fn rows_product_narrow(
     let fused = cfg!(target_arch = "aarch64")
         || multiversion::target::target_cfg_f!(target_feature = "fma");
     let madd = |w: f32, x: f32, a: f32| if fused { w.mul_add(x, a) } else { a + w * x };
-    let full = n - n % BLOCK_N;
+    // The AVX2 clone takes 16 columns at a time, a block's rows in two halves: 4 × 16 sums
+    // in 8 registers, 2 loads of `x` and 4 broadcast weights per 8 multiply-adds, where the
+    // 8 × 8 block takes 1 and 8 (Zen 3 issues two 256-bit loads a cycle: 4.5 cycles of loads
+    // for the two FMA pipes' 4). The baseline clone (SSE2) and aarch64 keep 8 × 8, as do
+    // the AVX2 clone's last 8 to 15 columns. Every output's sum runs over `p` in order.
+    let wide = multiversion::target::target_cfg_f!(target_feature = "avx2");
+    let full_wide = if wide { n - n % WIDE_N } else { 0 };
+    let full = n - (n - full_wide) % BLOCK_N;
     for (b, wb) in wp.chunks_exact(k * BLOCK_M).enumerate() {
         let i0 = b * BLOCK_M;
         let rows = BLOCK_M.min(m.saturating_sub(i0));
-        for j in (0..full).step_by(BLOCK_N) {
-            let mut acc = [[0.0f32; BLOCK_N]; BLOCK_M];
-            // The row's values copied into an array first: written on the slice, the same
-            // loop was vectorised across the wrong dimension (shuffles, 4× slower).
-            for (p, w) in wb.chunks_exact(BLOCK_M).enumerate() {
-                let mut xv = [0.0f32; BLOCK_N];
-                xv.copy_from_slice(&x[p * xs + j..p * xs + j + BLOCK_N]);
-                for (a, &w) in acc.iter_mut().zip(w) {
-                    for l in 0..BLOCK_N {
-                        a[l] = madd(w, xv[l], a[l]);
-                    }
-                }
+        for j in (0..full_wide).step_by(WIDE_N) {
+            for r0 in (0..rows).step_by(HALF_M) {
+                let acc = block_sums::<HALF_M, WIDE_N>(&madd, wb, r0, x, xs, j);
+                store_block(&acc, rows - r0, &bias[i0 + r0..], y, (i0 + r0) * ys + j, ys);
             }
-            for (i, a) in acc.iter().enumerate().take(rows) {
-                let b = bias[i0 + i];
-                let at = (i0 + i) * ys + j;
-                for (y, &a) in y[at..at + BLOCK_N].iter_mut().zip(a) {
-                    *y = a + b;
-                }
-            }
+        }
+        for j in (full_wide..full).step_by(BLOCK_N) {
+            let acc = block_sums::<BLOCK_M, BLOCK_N>(&madd, wb, 0, x, xs, j);
+            store_block(&acc, rows, &bias[i0..], y, i0 * ys + j, ys);
         }
         for j in full..n {
             for i in 0..rows {
@@ -620,6 +620,49 @@ fn rows_product_narrow(
             for i in i0..i0 + rows {
                 apply_in_place(f, &mut y[i * ys..i * ys + n]);
             }
+        }
+    }
+}
+
+/// [`rows_product_narrow`]'s `R × N` sums from row `r0` of a packed block `wb` and column
+/// `j` of `x`: each `Σ_p madd(w, x, ·)` over `p` in order from zero, in registers. The row's
+/// values are copied into an array first: read from the slice, the same loop was vectorised
+/// across the wrong dimension (shuffles, 4× slower). Inlined into each clone of the caller.
+#[inline(always)]
+fn block_sums<const R: usize, const N: usize>(
+    madd: &impl Fn(f32, f32, f32) -> f32,
+    wb: &[f32],
+    r0: usize,
+    x: &[f32],
+    xs: usize,
+    j: usize,
+) -> [[f32; N]; R] {
+    let mut acc = [[0.0f32; N]; R];
+    for (p, w) in wb.chunks_exact(BLOCK_M).enumerate() {
+        let mut xv = [0.0f32; N];
+        xv.copy_from_slice(&x[p * xs + j..p * xs + j + N]);
+        for (a, &w) in acc.iter_mut().zip(&w[r0..r0 + R]) {
+            for l in 0..N {
+                a[l] = madd(w, xv[l], a[l]);
+            }
+        }
+    }
+    acc
+}
+
+/// The first `rows` of `acc` plus their `bias` into `y` from `at`, rows `ys` apart.
+#[inline(always)]
+fn store_block<const R: usize, const N: usize>(
+    acc: &[[f32; N]; R],
+    rows: usize,
+    bias: &[f32],
+    y: &mut [f32],
+    at: usize,
+    ys: usize,
+) {
+    for (i, (a, &b)) in acc.iter().zip(bias).enumerate().take(rows) {
+        for (y, &a) in y[at + i * ys..at + i * ys + N].iter_mut().zip(a) {
+            *y = a + b;
         }
     }
 }
@@ -927,6 +970,66 @@ mod tests {
             }
         }
         println!("AVX-512 kernel ran: {avx512}");
+    }
+
+    /// Every path of [`rows_product`] (the AVX2 clone's 4 × 16 and 8 × 8 blocks, the
+    /// AVX-512 kernel, the last columns one at a time) gives each output as one sum over `p`
+    /// in order from zero, then the bias, then the activation: the scalar sum here, bit for
+    /// bit. Fused where the kernel fuses (the AVX2 + FMA clone, aarch64), otherwise a
+    /// multiply then an add. Shapes with partial row blocks and half blocks, columns that
+    /// end inside a 16-, an 8-column block and a single column, and strided rows.
+    #[test]
+    fn the_product_sums_each_output_in_order() {
+        #[cfg(target_arch = "x86_64")]
+        let fused = std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma");
+        #[cfg(not(target_arch = "x86_64"))]
+        let fused = cfg!(target_arch = "aarch64");
+        let mut seed = 5u32;
+        let mut rnd = move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32 - 0.5
+        };
+        for (m, k, n, xs) in [
+            (8, 27, 127, 127),
+            (16, 72, 256, 4096),
+            (3, 5, 33, 50),
+            (5, 9, 16, 16),
+            (13, 17, 57, 64),
+            (24, 1, 40, 40),
+            (11, 29, 21, 21),
+        ] {
+            let w: Vec<f32> = (0..m * k).map(|_| rnd()).collect();
+            let x: Vec<f32> = (0..k * xs).map(|_| rnd()).collect();
+            let bias: Vec<f32> = (0..m).map(|_| rnd()).collect();
+            let wp = pack_rows(&w, m, k);
+            for act in [None, Some(Unary::Relu), Some(Unary::HardSwish)] {
+                let ys = n + 3;
+                let mut y = vec![f32::NAN; m * ys];
+                rows_product((m, k, n), &wp, &x, xs, &bias, act, &mut y, ys);
+                for i in 0..m {
+                    for j in 0..n {
+                        let mut a = 0.0f32;
+                        for p in 0..k {
+                            let (w, x) = (w[i * k + p], x[p * xs + j]);
+                            a = if fused { w.mul_add(x, a) } else { a + w * x };
+                        }
+                        let v = a + bias[i];
+                        let v = act.map_or(v, |f| f.eval(v));
+                        let got = y[i * ys + j];
+                        assert_eq!(
+                            got.to_bits(),
+                            v.to_bits(),
+                            "{m}×{k} by {k}×{n}, ({i}, {j}), {act:?}"
+                        );
+                    }
+                    assert!(
+                        y[i * ys + n..(i + 1) * ys].iter().all(|v| v.is_nan()),
+                        "past row {i}"
+                    );
+                }
+            }
+        }
     }
 
     /// The stride-2 convolution read from the input rows ([`conv_s2`], where the CPU has
