@@ -318,6 +318,18 @@ fn depthwise_rows(
         let last = (g.out_h + k - 2) * wq + (across - 1) * LANES + LANES + k - 1;
         g.k_h == k && matches!(k, 3 | 5) && (sh, sw) == (1, 1) && last <= scratch.phases.len()
     });
+    // On a CPU with AVX2 and without AVX-512, the same square kernels at both strides 1 go
+    // to [`rows8::ring`], whose windows start at each padded row and 8-value block.
+    #[cfg(target_arch = "x86_64")]
+    let v3 = pulp::x86::V3::try_new().filter(|_| {
+        let (k, blocks) = (g.k_w, g.out_w.div_ceil(8));
+        let last = (g.out_h + k - 2) * wq + blocks * 8 + k - 1;
+        wide && v4.is_none()
+            && g.k_h == k
+            && matches!(k, 3 | 5)
+            && (sh, sw) == (1, 1)
+            && last <= scratch.phases.len()
+    });
     // Where each input row's values go, worked out once for all channels (every channel's
     // plane has the same layout; the divisions by the strides cost more per row than the
     // copies of 12-value rows themselves): per input row its offset in the plane and its
@@ -405,6 +417,17 @@ fn depthwise_rows(
         let wide = &mut scratch.wide[..span];
         let kernel = &weights[c * taps..(c + 1) * taps];
         let out = &mut output[c * g.out_plane()..(c + 1) * g.out_plane()];
+        #[cfg(target_arch = "x86_64")]
+        if let Some(simd) = v3 {
+            let (phases, shape, b) = (&scratch.phases[..], (g.out_h, g.out_w, wq), bias[c]);
+            let done = match g.k_w {
+                3 => rows8::ring::<3, 10>(simd, out, shape, phases, kernel, b),
+                _ => rows8::ring::<5, 12>(simd, out, shape, phases, kernel, b),
+            };
+            if done {
+                continue;
+            }
+        }
         // 2. and 3. on AVX-512, for the networks' square kernels: each block summed over
         //    every kernel row in registers, at stride 1 straight into the output rows (each
         //    padded row's taps loaded once for the output rows that read them where both
@@ -513,6 +536,104 @@ fn depthwise_rows(
 
 /// Block of the wide buffer's length: it holds whole blocks of 16 values for [`wide16`].
 const LANES: usize = 16;
+
+/// The networks' square kernels (3 × 3 and 5 × 5) at stride 1 summed in registers on 8-value
+/// blocks, for x86-64 CPUs with AVX2 and without AVX-512 (pulp's `x86::V3`, safe code):
+/// [`wide16`]'s `rows_ring` on AVX2's 8 lanes. (Written on arrays for the compiler to
+/// vectorise, the same sums stayed scalar; each block read from its own `K²` taps, as
+/// `rows_out` does, was slower than the wide rows at stride 2, whose taps are not side by
+/// side.) Each output is the sum of the rows above (the
+/// bias, then kernel row after kernel row, each `w₀·t₀ + w₁·t₁ + …` from the left, multiplies
+/// and adds apart): the same bits. A block past a row's end computes lanes it does not store.
+#[cfg(target_arch = "x86_64")]
+mod rows8 {
+    use pulp::x86::V3;
+    use pulp::{f32x8, Simd};
+
+    /// Values a block.
+    const N: usize = 8;
+
+    /// The 8 values from `win[o..]`.
+    #[inline(always)]
+    fn at<const W: usize>(win: &[f32; W], o: usize) -> f32x8 {
+        let (arrays, _) = pulp::as_arrays::<N, f32>(&win[o..o + N]);
+        pulp::cast(arrays[0])
+    }
+
+    /// A kernel row's sum over its taps `t` (`t[kx]` the row's values shifted by `kx`), `w`
+    /// its weights splat.
+    #[inline(always)]
+    fn row_sum<const K: usize>(simd: V3, w: &[f32x8; K], t: &[f32x8; K]) -> f32x8 {
+        let mut s = simd.mul_f32s(w[0], t[0]);
+        for kx in 1..K {
+            s = simd.add_f32s(s, simd.mul_f32s(w[kx], t[kx]));
+        }
+        s
+    }
+
+    /// The first `n` values of `v` to `out[o..]`, if they fit.
+    #[inline(always)]
+    fn store(simd: V3, out: &mut [f32], o: usize, v: f32x8, n: usize) {
+        if n == N {
+            if let Some(dst) = out.get_mut(o..o + N) {
+                dst.copy_from_slice(&pulp::cast::<f32x8, [f32; N]>(v));
+            }
+        } else if let Some(dst) = out.get_mut(o..o + n) {
+            simd.partial_store_f32s(dst, v);
+        }
+    }
+
+    /// A square `K × K` kernel at stride 1 in both directions, each padded row's taps loaded
+    /// once for the `K` output rows that read them: per column block the padded rows in
+    /// order, each row's window (`W = 8 + K − 1` values) summed by every kernel row into the
+    /// output row it belongs to (`K` sums in registers, one finished and stored per padded
+    /// row). Padded row `p` starts at `p · wq`. The caller has checked that every window
+    /// lies in `phases` (one outside reads zeros). `false` (nothing done) when the sizes do
+    /// not match.
+    pub(super) fn ring<const K: usize, const W: usize>(
+        simd: V3,
+        out: &mut [f32],
+        (out_h, out_w, wq): (usize, usize, usize),
+        phases: &[f32],
+        kernel: &[f32],
+        bias: f32,
+    ) -> bool {
+        if W != N + K - 1 || kernel.len() != K * K || out.len() != out_h * out_w {
+            return false;
+        }
+        simd.vectorize(
+            #[inline(always)]
+            || {
+                let w: [[f32x8; K]; K] = std::array::from_fn(|ky| {
+                    std::array::from_fn(|kx| simd.splat_f32s(kernel[ky * K + kx]))
+                });
+                let (zeros, b) = ([0.0; W], simd.splat_f32s(bias));
+                for x in (0..out_w).step_by(N) {
+                    let n = (out_w - x).min(N);
+                    // `acc[i]`: output row `p + 1 + i − K` while padded row `p` is summed in
+                    // (its kernel row `K − 1 − i`); rows outside the output are summed and
+                    // dropped.
+                    let mut acc = [b; K];
+                    for p in 0..out_h + K - 1 {
+                        let s = p * wq + x;
+                        let win = phases.get(s..s + W).and_then(|v| v.first_chunk::<W>());
+                        let win = win.unwrap_or(&zeros);
+                        let taps: [f32x8; K] = std::array::from_fn(|kx| at(win, kx));
+                        for (i, a) in acc.iter_mut().enumerate() {
+                            let t = row_sum::<K>(simd, &w[K - 1 - i], &taps);
+                            *a = simd.add_f32s(if i + 1 == K { b } else { *a }, t);
+                        }
+                        if let Some(oy) = (p + 1).checked_sub(K) {
+                            store(simd, out, oy * out_w + x, acc[0], n);
+                        }
+                        acc = std::array::from_fn(|i| acc[(i + 1) % K]);
+                    }
+                }
+            },
+        );
+        true
+    }
+}
 
 /// [`row3`] and [`row5`] on 16-value AVX-512 blocks, in safe code through pulp's `x86::V4`
 /// (detected at run time): each value the same multiplies and adds in the same order, so the
@@ -1236,14 +1357,16 @@ mod tests {
         let _ = in_place;
     }
 
-    /// The stride-1 rows that load each padded row's taps once ([`wide16::rows_ring`], where
-    /// the CPU has AVX-512) against the narrow rows: the same bits at every padding a kernel
+    /// The stride-1 rows that load each padded row's taps once ([`wide16::rows_ring`] where
+    /// the CPU has AVX-512, [`rows8::ring`] where it has AVX2 only) against the narrow rows: the same bits at every padding a kernel
     /// takes, on NanoTrack's 16 × 16 and 32 × 32 maps and on rows that end mid-block, take
     /// several blocks, or are shorter than the kernel (rows and columns of padding only).
     #[test]
     fn the_stride_1_ring_gives_the_narrow_rows_bits() {
         let (mut wide, mut narrow) = (Scratch::default(), Scratch::default());
         let mut cases = 0u32;
+        #[cfg_attr(not(target_arch = "x86_64"), allow(unused_mut))] // counted with AVX2
+        let mut avx2 = 0usize;
         let sizes = [
             (16, 16),
             (32, 32),
@@ -1279,11 +1402,43 @@ mod tests {
                     assert!(d(&mut a, &mut wide, true) && d(&mut b, &mut narrow, false));
                     let same = a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits());
                     assert!(same, "{g:?}: the ring's bits differ");
+                    // The AVX2 ring (which the CPUs without AVX-512 take) on the first
+                    // channel's padded plane, called itself, so that it cannot pass untried.
+                    #[cfg(target_arch = "x86_64")]
+                    if let Some(simd) = pulp::x86::V3::try_new() {
+                        let (hq, wq) = (g.phase_h(), g.phase_w());
+                        let mut phases = vec![0.0; hq * wq + 16];
+                        for (y, row) in input[..h * w].chunks_exact(w).enumerate() {
+                            for (x, &v) in row.iter().enumerate() {
+                                if y + pt < hq && x + pl < wq {
+                                    phases[(y + pt) * wq + x + pl] = v;
+                                }
+                            }
+                        }
+                        let mut c = vec![f32::NAN; g.out_plane()];
+                        let (shape, kernel) = ((g.out_h, g.out_w, wq), &weights[..k * k]);
+                        let ran = match k {
+                            3 => {
+                                rows8::ring::<3, 10>(simd, &mut c, shape, &phases, kernel, bias[0])
+                            }
+                            _ => {
+                                rows8::ring::<5, 12>(simd, &mut c, shape, &phases, kernel, bias[0])
+                            }
+                        };
+                        let same = c.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits());
+                        assert!(ran && same, "{g:?}: the AVX2 ring's bits differ");
+                        avx2 += 1;
+                    }
                     cases += 1;
                 }
             }
         }
         assert!(cases >= 60, "{cases} cases");
+        #[cfg(target_arch = "x86_64")]
+        if pulp::x86::V3::try_new().is_some() {
+            assert_eq!(avx2, cases as usize, "the AVX2 ring ran on every shape");
+        }
+        let _ = avx2;
     }
 
     #[test]
