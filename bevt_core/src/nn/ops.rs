@@ -520,9 +520,10 @@ pub(crate) fn pack_rows(w: &[f32], m: usize, k: usize) -> Vec<f32> {
 /// planes, or one output row's im2col), the bias and an activation applied as each value is
 /// stored. `wp` is `w` packed by [`pack_rows`].
 ///
-/// Each sum runs over `p` in order from zero, then adds the bias. 8 × 8 outputs are summed
-/// in registers, each of `x`'s values loaded once for 8 broadcast weights; `x`'s rows are
-/// read where they lie (`pointwise` copies a 1 × 1 convolution's into tiles first).
+/// Each sum runs over `p` in order from zero, then adds the bias. Blocks of outputs are
+/// summed in registers (4 × 16 in the AVX2 clone, 8 × 8 otherwise), each of `x`'s values
+/// loaded once for the block's broadcast weights; `x`'s rows are read where they lie
+/// (`pointwise` copies a 1 × 1 convolution's into tiles first).
 ///
 /// On x86-64 CPUs with AVX-512 every column goes to [`wide`]'s kernel (8 × 32 outputs in
 /// registers, then 8 × 16 for an odd block, then the last columns in masked registers; the
@@ -556,7 +557,8 @@ pub(crate) fn rows_product(
     }
 }
 
-/// [`rows_product`] with 8 × 8 outputs in registers (AVX2 + FMA clone and the baseline).
+/// [`rows_product`] with 4 × 16 (AVX2 + FMA clone) or 8 × 8 (the baseline, aarch64, the
+/// AVX2 clone's last columns) outputs in registers.
 #[allow(clippy::too_many_arguments)]
 #[multiversion::multiversion(targets("x86_64+avx2+fma"))]
 fn rows_product_narrow(

@@ -33,7 +33,10 @@
 //! with no wide buffer and no step 3; the taps of a kernel row are read from one window.
 //! At stride 2 (the backbone's down-sampling layers) square kernels skip all three steps
 //! where rows hold at least 32 values: each block's taps are the even and odd lanes of two
-//! loads from the input row where it lies, one AVX-512 permute per tap.
+//! loads from the input row where it lies, one AVX-512 permute per tap. On CPUs with AVX2 and
+//! without AVX-512 the square kernels at stride 1 are summed in registers on 8-value blocks
+//! (`rows8`, pulp's `x86::V3`), each padded row's taps loaded once for the output rows that
+//! read them; other kernels and strides take the wide rows.
 //!
 //! Tested against a naive reference here; the networks' outputs against ONNX Runtime's
 //! reference values (`tests/integration/verifier.rs`).
@@ -417,40 +420,26 @@ fn depthwise_rows(
         let wide = &mut scratch.wide[..span];
         let kernel = &weights[c * taps..(c + 1) * taps];
         let out = &mut output[c * g.out_plane()..(c + 1) * g.out_plane()];
+        // 2. and 3. in registers for the networks' square kernels: on AVX2 alone the stride-1
+        //    ring ([`rows8`]); on AVX-512 each block summed over every kernel row, at stride 1
+        //    straight into the output rows (each padded row's taps loaded once for the output
+        //    rows that read them where both strides are 1; else where that costs no more
+        //    blocks), else (below) into the wide rows, then their valid columns. Each path
+        //    returns false (nothing written) on sizes it does not take.
         #[cfg(target_arch = "x86_64")]
-        if let Some(simd) = v3 {
+        {
             let (phases, shape, b) = (&scratch.phases[..], (g.out_h, g.out_w, wq), bias[c]);
-            let done = match g.k_w {
-                3 => rows8::ring::<3, 10>(simd, out, shape, phases, kernel, b),
-                _ => rows8::ring::<5, 12>(simd, out, shape, phases, kernel, b),
-            };
-            if done {
-                continue;
-            }
-        }
-        // 2. and 3. on AVX-512, for the networks' square kernels: each block summed over
-        //    every kernel row in registers, at stride 1 straight into the output rows (each
-        //    padded row's taps loaded once for the output rows that read them where both
-        //    strides are 1; else where that costs no more blocks), else into the wide rows,
-        //    then their valid columns.
-        #[cfg(target_arch = "x86_64")]
-        if let Some(simd) = ring {
-            let (phases, shape, b) = (&scratch.phases[..], (g.out_h, g.out_w, wq), bias[c]);
-            let done = match g.k_w {
-                3 => wide16::rows_ring::<3, 9, 18>(simd, out, shape, phases, kernel, b),
-                _ => wide16::rows_ring::<5, 25, 20>(simd, out, shape, phases, kernel, b),
-            };
-            if done {
-                continue;
-            }
-        }
-        #[cfg(target_arch = "x86_64")]
-        if let Some(simd) = direct {
-            let (phases, shape, b) = (&scratch.phases[..], (g.out_h, g.out_w, wq), bias[c]);
-            let done = match g.k_w {
-                3 => wide16::rows_out::<3, 9, 18>(simd, out, shape, phases, starts, kernel, b),
-                _ => wide16::rows_out::<5, 25, 20>(simd, out, shape, phases, starts, kernel, b),
-            };
+            let k3 = g.k_w == 3;
+            let done = v3.is_some_and(|simd| match k3 {
+                true => rows8::ring::<3, 10>(simd, out, shape, phases, kernel, b),
+                false => rows8::ring::<5, 12>(simd, out, shape, phases, kernel, b),
+            }) || ring.is_some_and(|simd| match k3 {
+                true => wide16::rows_ring::<3, 9, 18>(simd, out, shape, phases, kernel, b),
+                false => wide16::rows_ring::<5, 25, 20>(simd, out, shape, phases, kernel, b),
+            }) || direct.is_some_and(|simd| match k3 {
+                true => wide16::rows_out::<3, 9, 18>(simd, out, shape, phases, starts, kernel, b),
+                false => wide16::rows_out::<5, 25, 20>(simd, out, shape, phases, starts, kernel, b),
+            });
             if done {
                 continue;
             }
@@ -1197,6 +1186,37 @@ mod tests {
             .collect()
     }
 
+    /// One case's input, weights and bias, and its outputs without the register paths.
+    struct Both {
+        input: Vec<f32>,
+        weights: Vec<f32>,
+        bias: Vec<f32>,
+        narrow: Vec<f32>,
+    }
+
+    /// A case of `g` from `seed`, run with the register paths allowed (`wide` scratch) and
+    /// not (`narrow`): the two outputs must be the same bits.
+    fn both_paths(g: &Geometry, seed: u32, wide: &mut Scratch, narrow: &mut Scratch) -> Both {
+        let c = g.channels;
+        let input = values(c * g.in_plane(), seed);
+        let weights = values(c * g.k_h * g.k_w, seed + 1000);
+        let bias = values(c, seed + 2000);
+        let mut a = vec![f32::NAN; c * g.out_plane()];
+        let mut b = vec![f32::NAN; c * g.out_plane()];
+        let d = |o: &mut Vec<f32>, s: &mut Scratch, on: bool| {
+            depthwise_rows(g, &input, &weights, &bias, o, s, on)
+        };
+        assert!(d(&mut a, wide, true) && d(&mut b, narrow, false));
+        let same = a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits());
+        assert!(same, "{g:?}: the register paths' bits differ");
+        Both {
+            input,
+            weights,
+            bias,
+            narrow: b,
+        }
+    }
+
     #[test]
     fn matches_a_naive_reference_on_odd_sizes_strides_kernels_and_padding() {
         let mut scratch = Scratch::default();
@@ -1263,27 +1283,10 @@ mod tests {
             let Some(g) = Geometry::new(c, (n, n), (kh, k), (s, s), (ph, ph), (p, p)) else {
                 panic!("valid geometry refused")
             };
-            let input = values(c * n * n, cases);
-            let weights = values(c * kh * k, cases + 1000);
-            let bias = values(c, cases + 2000);
-            let mut a = vec![f32::NAN; c * g.out_plane()];
-            let mut b = vec![f32::NAN; c * g.out_plane()];
-            assert!(depthwise_rows(
-                &g, &input, &weights, &bias, &mut a, &mut wide, true
-            ));
-            assert!(depthwise_rows(
-                &g,
-                &input,
-                &weights,
-                &bias,
-                &mut b,
-                &mut narrow,
-                false
-            ));
-            let same = a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits());
-            assert!(same, "{g:?}: the wide rows' bits differ");
+            // The same bits either way, every output written (the buffers start as NaN).
+            let b = both_paths(&g, cases, &mut wide, &mut narrow).narrow;
             assert!(
-                a.iter().all(|v| v.is_finite()),
+                b.iter().all(|v| v.is_finite()),
                 "{g:?}: an output not written"
             );
         }
@@ -1322,17 +1325,12 @@ mod tests {
                     let Some(g) = g else {
                         continue;
                     };
-                    let input = values(2 * h * w, cases);
-                    let weights = values(2 * k * k, cases + 1000);
-                    let bias = values(2, cases + 2000);
-                    let mut a = vec![f32::NAN; 2 * g.out_plane()];
-                    let mut b = vec![f32::NAN; 2 * g.out_plane()];
-                    let d = |o: &mut Vec<f32>, s: &mut Scratch, on: bool| {
-                        depthwise_rows(&g, &input, &weights, &bias, o, s, on)
-                    };
-                    assert!(d(&mut a, &mut wide, true) && d(&mut b, &mut narrow, false));
-                    let same = a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits());
-                    assert!(same, "{g:?}: the stride-2 planes' bits differ");
+                    let Both {
+                        input,
+                        weights,
+                        bias,
+                        narrow: mut b,
+                    } = both_paths(&g, cases, &mut wide, &mut narrow);
                     // The rows of 32 values or more did take the in-place path.
                     #[cfg(target_arch = "x86_64")]
                     if let Some(simd) = pulp::x86::V4::try_new() {
@@ -1358,9 +1356,10 @@ mod tests {
     }
 
     /// The stride-1 rows that load each padded row's taps once ([`wide16::rows_ring`] where
-    /// the CPU has AVX-512, [`rows8::ring`] where it has AVX2 only) against the narrow rows: the same bits at every padding a kernel
-    /// takes, on NanoTrack's 16 × 16 and 32 × 32 maps and on rows that end mid-block, take
-    /// several blocks, or are shorter than the kernel (rows and columns of padding only).
+    /// the CPU has AVX-512, [`rows8::ring`] where it has AVX2 only) against the narrow rows:
+    /// the same bits at every padding a kernel takes, on NanoTrack's 16 × 16 and 32 × 32 maps
+    /// and on rows that end mid-block, take several blocks, or are shorter than the kernel
+    /// (rows and columns of padding only).
     #[test]
     fn the_stride_1_ring_gives_the_narrow_rows_bits() {
         let (mut wide, mut narrow) = (Scratch::default(), Scratch::default());
@@ -1391,17 +1390,12 @@ mod tests {
                     let Some(g) = g else {
                         continue;
                     };
-                    let input = values(3 * h * w, cases);
-                    let weights = values(3 * k * k, cases + 1000);
-                    let bias = values(3, cases + 2000);
-                    let mut a = vec![f32::NAN; 3 * g.out_plane()];
-                    let mut b = vec![f32::NAN; 3 * g.out_plane()];
-                    let d = |o: &mut Vec<f32>, s: &mut Scratch, on: bool| {
-                        depthwise_rows(&g, &input, &weights, &bias, o, s, on)
-                    };
-                    assert!(d(&mut a, &mut wide, true) && d(&mut b, &mut narrow, false));
-                    let same = a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits());
-                    assert!(same, "{g:?}: the ring's bits differ");
+                    let Both {
+                        input,
+                        weights,
+                        bias,
+                        narrow: b,
+                    } = both_paths(&g, cases, &mut wide, &mut narrow);
                     // The AVX2 ring (which the CPUs without AVX-512 take) on the first
                     // channel's padded plane, called itself, so that it cannot pass untried.
                     #[cfg(target_arch = "x86_64")]
