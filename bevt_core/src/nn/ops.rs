@@ -437,14 +437,16 @@ pub(super) fn im2col_row(s: &ConvShape, x: &[f32], oy: usize, col: &mut [f32]) {
     }
 }
 
-/// Output channels per block of [`rows_product`]'s packed weights.
+/// Output channels per block of [`rows_product`]'s packed weights on the AVX-512 kernels, the
+/// baseline and aarch64 ([`block_rows`]).
 pub(super) const BLOCK_M: usize = 8;
 /// Output columns per step of [`rows_product`].
 const BLOCK_N: usize = 8;
-/// Output columns per step of [`rows_product`]'s AVX2 clone, [`HALF_M`] rows at a time.
+/// Output columns per step of [`rows_product`]'s AVX2 clone.
 const WIDE_N: usize = 16;
-/// Half a block of rows.
-const HALF_M: usize = BLOCK_M / 2;
+/// Rows of a packed block on CPUs with AVX2 and without the AVX-512 kernel: 6 × 16 sums in
+/// 12 of AVX2's 16 registers.
+const AVX2_BLOCK_M: usize = 6;
 
 /// Columns of the input a 1 × 1 convolution copies together for [`rows_product`]: about
 /// 16 KB of input (`k` rows), in whole blocks of 32 (the AVX-512 kernel's widest step), at
@@ -501,15 +503,30 @@ fn scale_copy(dst: &mut [f32], src: &[f32], s: f32, g: Option<Unary>) {
     }
 }
 
-/// A row-major `m × k` matrix packed for [`rows_product`]: per block of [`BLOCK_M`] rows,
-/// `k` groups of `BLOCK_M` values (column `p` of the block's rows), zeros past row `m`.
+/// Rows of a block of [`pack_rows`]' packing on this CPU: [`AVX2_BLOCK_M`] where
+/// [`rows_product`] runs on the AVX2 clone of its narrow kernel (AVX2 and FMA, no AVX-512
+/// kernel), [`BLOCK_M`] elsewhere (the AVX-512 kernels, the baseline and aarch64).
+pub(crate) fn block_rows() -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2")
+        && std::arch::is_x86_feature_detected!("fma")
+        && pulp::x86::V4::try_new().is_none()
+    {
+        return AVX2_BLOCK_M;
+    }
+    BLOCK_M
+}
+
+/// A row-major `m × k` matrix packed for [`rows_product`]: per block of [`block_rows`] rows,
+/// `k` groups of that many values (column `p` of the block's rows), zeros past row `m`.
 pub(crate) fn pack_rows(w: &[f32], m: usize, k: usize) -> Vec<f32> {
-    let blocks = m.div_ceil(BLOCK_M);
-    let mut out = vec![0.0; blocks * k * BLOCK_M];
+    let bm = block_rows();
+    let blocks = m.div_ceil(bm);
+    let mut out = vec![0.0; blocks * k * bm];
     for (i, row) in w.chunks_exact(k).take(m).enumerate() {
-        let block = &mut out[(i / BLOCK_M) * k * BLOCK_M..];
+        let block = &mut out[(i / bm) * k * bm..];
         for (p, &v) in row.iter().enumerate() {
-            block[p * BLOCK_M + i % BLOCK_M] = v;
+            block[p * bm + i % bm] = v;
         }
     }
     out
@@ -521,7 +538,7 @@ pub(crate) fn pack_rows(w: &[f32], m: usize, k: usize) -> Vec<f32> {
 /// stored. `wp` is `w` packed by [`pack_rows`].
 ///
 /// Each sum runs over `p` in order from zero, then adds the bias. Blocks of outputs are
-/// summed in registers (4 × 16 in the AVX2 clone, 8 × 8 otherwise), each of `x`'s values
+/// summed in registers (6 × 16 in the AVX2 clone, 8 × 8 otherwise), each of `x`'s values
 /// loaded once for the block's broadcast weights; `x`'s rows are read where they lie
 /// (`pointwise` copies a 1 × 1 convolution's into tiles first).
 ///
@@ -557,8 +574,8 @@ pub(crate) fn rows_product(
     }
 }
 
-/// [`rows_product`] with 4 × 16 (AVX2 + FMA clone) or 8 × 8 (the baseline, aarch64, the
-/// AVX2 clone's last columns) outputs in registers.
+/// [`rows_product`] with 6 × 16 (AVX2 + FMA clone, 6-row packing) or 8 × 8 (the baseline,
+/// aarch64) outputs in registers.
 #[allow(clippy::too_many_arguments)]
 #[multiversion::multiversion(targets("x86_64+avx2+fma"))]
 fn rows_product_narrow(
@@ -586,34 +603,43 @@ fn rows_product_narrow(
     let fused = cfg!(target_arch = "aarch64")
         || multiversion::target::target_cfg_f!(target_feature = "fma");
     let madd = |w: f32, x: f32, a: f32| if fused { w.mul_add(x, a) } else { a + w * x };
-    // The AVX2 clone takes 16 columns at a time, a block's rows in two halves: 4 × 16 sums
-    // in 8 registers, 2 loads of `x` and 4 broadcast weights per 8 multiply-adds, where the
-    // 8 × 8 block takes 1 and 8 (Zen 3 issues two 256-bit loads a cycle: 4.5 cycles of loads
-    // for the two FMA pipes' 4). The baseline clone (SSE2) and aarch64 keep 8 × 8, as do
-    // the AVX2 clone's last 8 to 15 columns. Every output's sum runs over `p` in order.
-    let wide = multiversion::target::target_cfg_f!(target_feature = "avx2");
+    // The AVX2 clone (where no AVX-512 kernel runs: [`block_rows`]) takes 16 columns of a
+    // 6-row block at a time: 6 × 16 sums in 12 of AVX2's 16 registers, 2 loads of `x` and 6
+    // broadcast weights per 12 multiply-adds. The 8 × 8 block takes 1 and 8 per 8: Zen 3
+    // issues two 256-bit loads a cycle, so it was bound by its loads (4.5 cycles for the two
+    // FMA pipes' 4), and 8 sums only just cover the multiply-add's latency. The last 8 to 15
+    // columns take 6 × 8; the baseline clone (SSE2) and aarch64 keep 8 × 8 on 8-row blocks.
+    // Every output's sum runs over `p` in order.
+    let bm = block_rows();
+    let six = bm == AVX2_BLOCK_M;
+    let wide = six && multiversion::target::target_cfg_f!(target_feature = "avx2");
     let full_wide = if wide { n - n % WIDE_N } else { 0 };
     let full = n - (n - full_wide) % BLOCK_N;
-    for (b, wb) in wp.chunks_exact(k * BLOCK_M).enumerate() {
-        let i0 = b * BLOCK_M;
-        let rows = BLOCK_M.min(m.saturating_sub(i0));
+    for (b, wb) in wp.chunks_exact(k * bm).enumerate() {
+        let i0 = b * bm;
+        let rows = bm.min(m.saturating_sub(i0));
+        let (block, bias) = ((wb, bm), &bias[i0..]);
+        let at = |j: usize| (i0 * ys + j, ys);
         for j in (0..full_wide).step_by(WIDE_N) {
-            for r0 in (0..rows).step_by(HALF_M) {
-                let acc = block_sums::<HALF_M, WIDE_N>(&madd, wb, r0, x, xs, j);
-                store_block(&acc, rows - r0, &bias[i0 + r0..], y, (i0 + r0) * ys + j, ys);
-            }
+            let acc = block_sums::<AVX2_BLOCK_M, WIDE_N>(&madd, block, x, xs, j);
+            store_block(&acc, rows, bias, y, at(j));
         }
         for j in (full_wide..full).step_by(BLOCK_N) {
-            let acc = block_sums::<BLOCK_M, BLOCK_N>(&madd, wb, 0, x, xs, j);
-            store_block(&acc, rows, &bias[i0..], y, i0 * ys + j, ys);
+            if six {
+                let acc = block_sums::<AVX2_BLOCK_M, BLOCK_N>(&madd, block, x, xs, j);
+                store_block(&acc, rows, bias, y, at(j));
+            } else {
+                let acc = block_sums::<BLOCK_M, BLOCK_N>(&madd, block, x, xs, j);
+                store_block(&acc, rows, bias, y, at(j));
+            }
         }
         for j in full..n {
-            for i in 0..rows {
+            for (i, &b) in bias.iter().enumerate().take(rows) {
                 let mut a = 0.0f32;
-                for (p, w) in wb.chunks_exact(BLOCK_M).enumerate() {
+                for (p, w) in wb.chunks_exact(bm).enumerate() {
                     a = madd(w[i], x[p * xs + j], a);
                 }
-                y[(i0 + i) * ys + j] = a + bias[i0 + i];
+                y[(i0 + i) * ys + j] = a + b;
             }
         }
         // The activation over each finished row while it is in cache (a loop the compiler
@@ -626,24 +652,24 @@ fn rows_product_narrow(
     }
 }
 
-/// [`rows_product_narrow`]'s `R × N` sums from row `r0` of a packed block `wb` and column
-/// `j` of `x`: each `Σ_p madd(w, x, ·)` over `p` in order from zero, in registers. The row's
-/// values are copied into an array first: read from the slice, the same loop was vectorised
-/// across the wrong dimension (shuffles, 4× slower). Inlined into each clone of the caller.
+/// [`rows_product_narrow`]'s `R × N` sums from a packed block `wb` of `bm ≥ R` rows and
+/// column `j` of `x`: each `Σ_p madd(w, x, ·)` over `p` in order from zero, in registers. The
+/// row's values are copied into an array first: read from the slice, the same loop was
+/// vectorised across the wrong dimension (shuffles, 4× slower). Inlined into each clone of
+/// the caller.
 #[inline(always)]
 fn block_sums<const R: usize, const N: usize>(
     madd: &impl Fn(f32, f32, f32) -> f32,
-    wb: &[f32],
-    r0: usize,
+    (wb, bm): (&[f32], usize),
     x: &[f32],
     xs: usize,
     j: usize,
 ) -> [[f32; N]; R] {
     let mut acc = [[0.0f32; N]; R];
-    for (p, w) in wb.chunks_exact(BLOCK_M).enumerate() {
+    for (p, w) in wb.chunks_exact(bm).enumerate() {
         let mut xv = [0.0f32; N];
         xv.copy_from_slice(&x[p * xs + j..p * xs + j + N]);
-        for (a, &w) in acc.iter_mut().zip(&w[r0..r0 + R]) {
+        for (a, &w) in acc.iter_mut().zip(&w[..R]) {
             for l in 0..N {
                 a[l] = madd(w, xv[l], a[l]);
             }
@@ -659,8 +685,7 @@ fn store_block<const R: usize, const N: usize>(
     rows: usize,
     bias: &[f32],
     y: &mut [f32],
-    at: usize,
-    ys: usize,
+    (at, ys): (usize, usize),
 ) {
     for (i, (a, &b)) in acc.iter().zip(bias).enumerate().take(rows) {
         for (y, &a) in y[at + i * ys..at + i * ys + N].iter_mut().zip(a) {
@@ -974,8 +999,9 @@ mod tests {
         println!("AVX-512 kernel ran: {avx512}");
     }
 
-    /// Every path of [`rows_product`] (the AVX2 clone's 4 × 16 and 8 × 8 blocks, the
-    /// AVX-512 kernel, the last columns one at a time) gives each output as one sum over `p`
+    /// Every path of [`rows_product`] (the AVX2 clone's 6 × 16 and 6 × 8 blocks of 6-row
+    /// packing, the 8 × 8 blocks, the AVX-512 kernel, the last columns one at a time; the
+    /// host's [`block_rows`] decides which) gives each output as one sum over `p`
     /// in order from zero, then the bias, then the activation: the scalar sum here, bit for
     /// bit. Fused where the kernel fuses (the AVX2 + FMA clone, aarch64), otherwise a
     /// multiply then an add. Shapes with partial row blocks and half blocks, columns that
