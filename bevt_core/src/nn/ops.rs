@@ -1004,7 +1004,7 @@ mod tests {
     /// host's [`block_rows`] decides which) gives each output as one sum over `p`
     /// in order from zero, then the bias, then the activation: the scalar sum here, bit for
     /// bit. Fused where the kernel fuses (the AVX2 + FMA clone, aarch64), otherwise a
-    /// multiply then an add. Shapes with partial row blocks and half blocks, columns that
+    /// multiply then an add. Shapes with partial row blocks (of 6 and of 8), columns that
     /// end inside a 16-, an 8-column block and a single column, and strided rows.
     #[test]
     fn the_product_sums_each_output_in_order() {
