@@ -1187,6 +1187,7 @@ mod tests {
     }
 
     /// One case's input, weights and bias, and its outputs without the register paths.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // read by the x86-64 checks
     struct Both {
         input: Vec<f32>,
         weights: Vec<f32>,
@@ -1325,16 +1326,13 @@ mod tests {
                     let Some(g) = g else {
                         continue;
                     };
-                    let Both {
-                        input,
-                        weights,
-                        bias,
-                        narrow: mut b,
-                    } = both_paths(&g, cases, &mut wide, &mut narrow);
+                    #[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
+                    let both = both_paths(&g, cases, &mut wide, &mut narrow);
                     // The rows of 32 values or more did take the in-place path.
                     #[cfg(target_arch = "x86_64")]
                     if let Some(simd) = pulp::x86::V4::try_new() {
-                        let data = (&input[..], &weights[..], &bias[..]);
+                        let data = (&both.input[..], &both.weights[..], &both.bias[..]);
+                        let mut b = both.narrow;
                         let (out, win) = (&mut b[..], &mut wide.windows);
                         let ran = match k {
                             3 => wide16::planes_s2::<3, 9>(simd, &g, data, out, win),
@@ -1390,16 +1388,18 @@ mod tests {
                     let Some(g) = g else {
                         continue;
                     };
-                    let Both {
-                        input,
-                        weights,
-                        bias,
-                        narrow: b,
-                    } = both_paths(&g, cases, &mut wide, &mut narrow);
+                    #[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
+                    let both = both_paths(&g, cases, &mut wide, &mut narrow);
                     // The AVX2 ring (which the CPUs without AVX-512 take) on the first
                     // channel's padded plane, called itself, so that it cannot pass untried.
                     #[cfg(target_arch = "x86_64")]
                     if let Some(simd) = pulp::x86::V3::try_new() {
+                        let Both {
+                            input,
+                            weights,
+                            bias,
+                            narrow: b,
+                        } = both;
                         let (hq, wq) = (g.phase_h(), g.phase_w());
                         let mut phases = vec![0.0; hq * wq + 16];
                         for (y, row) in input[..h * w].chunks_exact(w).enumerate() {
