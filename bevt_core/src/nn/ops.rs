@@ -506,15 +506,20 @@ fn scale_copy(dst: &mut [f32], src: &[f32], s: f32, g: Option<Unary>) {
 /// Rows of a block of [`pack_rows`]' packing on this CPU: [`AVX2_BLOCK_M`] where
 /// [`rows_product`] runs on the AVX2 clone of its narrow kernel (AVX2 and FMA, no AVX-512
 /// kernel), [`BLOCK_M`] elsewhere (the AVX-512 kernels, the baseline and aarch64).
+/// Worked out once per process: the packing of every plan and the kernel that reads it
+/// agree, and a product call costs one load, not a CPU detection.
 pub(crate) fn block_rows() -> usize {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2")
-        && std::arch::is_x86_feature_detected!("fma")
-        && pulp::x86::V4::try_new().is_none()
-    {
-        return AVX2_BLOCK_M;
-    }
-    BLOCK_M
+    static ROWS: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+    *ROWS.get_or_init(|| {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+            && pulp::x86::V4::try_new().is_none()
+        {
+            return AVX2_BLOCK_M;
+        }
+        BLOCK_M
+    })
 }
 
 /// A row-major `m × k` matrix packed for [`rows_product`]: per block of [`block_rows`] rows,
