@@ -602,7 +602,11 @@ mod rows8 {
         kernel: &[f32],
         bias: f32,
     ) -> bool {
-        if W != N + K - 1 || kernel.len() != K * K || out.len() != out_h * out_w {
+        if !matches!(K, 3 | 5)
+            || W != N + K - 1
+            || kernel.len() != K * K
+            || out.len() != out_h * out_w
+        {
             return false;
         }
         simd.vectorize(
@@ -614,23 +618,31 @@ mod rows8 {
                 let (zeros, b) = ([0.0; W], simd.splat_f32s(bias));
                 for x in (0..out_w).step_by(N) {
                     let n = (out_w - x).min(N);
-                    // `acc[i]`: output row `p + 1 + i − K` while padded row `p` is summed in
+                    // `a[i]`: output row `p + 1 + i − K` while padded row `p` is summed in
                     // (its kernel row `K − 1 − i`); rows outside the output are summed and
-                    // dropped.
-                    let mut acc = [b; K];
+                    // dropped. Named, not an array in a loop, so that they stay in registers.
+                    let (mut a0, mut a1, mut a2, mut a3, mut a4) = (b, b, b, b, b);
                     for p in 0..out_h + K - 1 {
                         let s = p * wq + x;
                         let win = phases.get(s..s + W).and_then(|v| v.first_chunk::<W>());
                         let win = win.unwrap_or(&zeros);
                         let taps: [f32x8; K] = std::array::from_fn(|kx| at(win, kx));
-                        for (i, a) in acc.iter_mut().enumerate() {
-                            let t = row_sum::<K>(simd, &w[K - 1 - i], &taps);
-                            *a = simd.add_f32s(if i + 1 == K { b } else { *a }, t);
+                        let add = |a: f32x8, ky: usize| {
+                            simd.add_f32s(a, row_sum::<K>(simd, &w[ky], &taps))
+                        };
+                        a0 = add(a0, K - 1);
+                        a1 = add(a1, K - 2);
+                        if K == 5 {
+                            a2 = add(a2, 2);
+                            a3 = add(a3, 1);
+                            a4 = add(b, 0);
+                        } else {
+                            a2 = add(b, 0);
                         }
                         if let Some(oy) = (p + 1).checked_sub(K) {
-                            store(simd, out, oy * out_w + x, acc[0], n);
+                            store(simd, out, oy * out_w + x, a0, n);
                         }
-                        acc = std::array::from_fn(|i| acc[(i + 1) % K]);
+                        (a0, a1, a2, a3) = (a1, a2, a3, a4);
                     }
                 }
             },
