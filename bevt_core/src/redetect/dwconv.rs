@@ -333,18 +333,6 @@ fn depthwise_rows(
             && (sh, sw) == (1, 1)
             && last <= scratch.phases.len()
     });
-    // And at both strides 2 to [`rows8::ring_s2`], on the phase split: its windows start at
-    // each sub-plane's row and 8-value block, the last one ending in the phases' slack.
-    #[cfg(target_arch = "x86_64")]
-    let v3_s2 = pulp::x86::V3::try_new().filter(|_| {
-        let (k, blocks) = (g.k_w, g.out_w.div_ceil(8));
-        let last = 3 * sub + (hq - 1) * wq + blocks * 8 + k / 2;
-        wide && v4.is_none()
-            && g.k_h == k
-            && matches!(k, 3 | 5)
-            && (sh, sw) == (2, 2)
-            && last <= scratch.phases.len()
-    });
     // Where each input row's values go, worked out once for all channels (every channel's
     // plane has the same layout; the divisions by the strides cost more per row than the
     // copies of 12-value rows themselves): per input row its offset in the plane and its
@@ -432,8 +420,8 @@ fn depthwise_rows(
         let wide = &mut scratch.wide[..span];
         let kernel = &weights[c * taps..(c + 1) * taps];
         let out = &mut output[c * g.out_plane()..(c + 1) * g.out_plane()];
-        // 2. and 3. in registers for the networks' square kernels: on AVX2 alone the rings
-        //    ([`rows8`], stride 1 on the padded plane, stride 2 on its phases); on AVX-512 each block summed over every kernel row, at stride 1
+        // 2. and 3. in registers for the networks' square kernels: on AVX2 alone the stride-1
+        //    ring ([`rows8`]); on AVX-512 each block summed over every kernel row, at stride 1
         //    straight into the output rows (each padded row's taps loaded once for the output
         //    rows that read them where both strides are 1; else where that costs no more
         //    blocks), else (below) into the wide rows, then their valid columns. Each path
@@ -445,9 +433,6 @@ fn depthwise_rows(
             let done = v3.is_some_and(|simd| match k3 {
                 true => rows8::ring::<3, 10>(simd, out, shape, phases, kernel, b),
                 false => rows8::ring::<5, 12>(simd, out, shape, phases, kernel, b),
-            }) || v3_s2.is_some_and(|simd| match k3 {
-                true => rows8::ring_s2::<3, 9>(simd, out, shape, (phases, sub), kernel, b),
-                false => rows8::ring_s2::<5, 10>(simd, out, shape, (phases, sub), kernel, b),
             }) || ring.is_some_and(|simd| match k3 {
                 true => wide16::rows_ring::<3, 9, 18>(simd, out, shape, phases, kernel, b),
                 false => wide16::rows_ring::<5, 25, 20>(simd, out, shape, phases, kernel, b),
@@ -602,11 +587,7 @@ mod rows8 {
         kernel: &[f32],
         bias: f32,
     ) -> bool {
-        if !matches!(K, 3 | 5)
-            || W != N + K - 1
-            || kernel.len() != K * K
-            || out.len() != out_h * out_w
-        {
+        if W != N + K - 1 || kernel.len() != K * K || out.len() != out_h * out_w {
             return false;
         }
         simd.vectorize(
@@ -618,126 +599,23 @@ mod rows8 {
                 let (zeros, b) = ([0.0; W], simd.splat_f32s(bias));
                 for x in (0..out_w).step_by(N) {
                     let n = (out_w - x).min(N);
-                    // `a[i]`: output row `p + 1 + i − K` while padded row `p` is summed in
+                    // `acc[i]`: output row `p + 1 + i − K` while padded row `p` is summed in
                     // (its kernel row `K − 1 − i`); rows outside the output are summed and
-                    // dropped. Named, not an array in a loop, so that they stay in registers.
-                    let (mut a0, mut a1, mut a2, mut a3, mut a4) = (b, b, b, b, b);
+                    // dropped.
+                    let mut acc = [b; K];
                     for p in 0..out_h + K - 1 {
                         let s = p * wq + x;
                         let win = phases.get(s..s + W).and_then(|v| v.first_chunk::<W>());
                         let win = win.unwrap_or(&zeros);
                         let taps: [f32x8; K] = std::array::from_fn(|kx| at(win, kx));
-                        let add = |a: f32x8, ky: usize| {
-                            simd.add_f32s(a, row_sum::<K>(simd, &w[ky], &taps))
-                        };
-                        a0 = add(a0, K - 1);
-                        a1 = add(a1, K - 2);
-                        if K == 5 {
-                            a2 = add(a2, 2);
-                            a3 = add(a3, 1);
-                            a4 = add(b, 0);
-                        } else {
-                            a2 = add(b, 0);
+                        for (i, a) in acc.iter_mut().enumerate() {
+                            let t = row_sum::<K>(simd, &w[K - 1 - i], &taps);
+                            *a = simd.add_f32s(if i + 1 == K { b } else { *a }, t);
                         }
                         if let Some(oy) = (p + 1).checked_sub(K) {
-                            store(simd, out, oy * out_w + x, a0, n);
+                            store(simd, out, oy * out_w + x, acc[0], n);
                         }
-                        (a0, a1, a2, a3) = (a1, a2, a3, a4);
-                    }
-                }
-            },
-        );
-        true
-    }
-
-    /// The taps of one padded row at stride 2 for the column block whose even-column window
-    /// starts at `s` (the odd-column one `sub` later): tap `kx` is the column parity `kx % 2`'s
-    /// values from `kx / 2` on. A window outside `phases` reads zeros.
-    #[inline(always)]
-    fn taps_s2<const K: usize, const W: usize>(
-        phases: &[f32],
-        s: usize,
-        sub: usize,
-        zeros: &[f32; W],
-    ) -> [f32x8; K] {
-        let window = |s: usize| {
-            phases
-                .get(s..s + W)
-                .and_then(|v| v.first_chunk::<W>())
-                .unwrap_or(zeros)
-        };
-        let (even, odd) = (window(s), window(s + sub));
-        std::array::from_fn(|kx| at(if kx % 2 == 0 { even } else { odd }, kx / 2))
-    }
-
-    /// A square `K × K` kernel at stride 2 in both directions, on the phase split (four
-    /// sub-planes of `sub` values: the padded rows' parity, then the columns'; rows `wq`
-    /// apart), each padded row's taps loaded once for the output rows that read them. Padded
-    /// row `p` is read by output row `(p − ky) / 2` for each kernel row `ky` of `p`'s parity,
-    /// so per column block the padded rows are walked in pairs (even, odd), each row's two
-    /// windows (`W = 8 + (K − 1)/2` values of each column parity) summed by its kernel rows
-    /// into `R = (K + 1)/2` output rows in registers; the even row finishes the oldest,
-    /// which is stored. The caller has checked that every window lies in `phases` (one
-    /// outside reads zeros). `false` (nothing done) when the sizes do not match.
-    pub(super) fn ring_s2<const K: usize, const W: usize>(
-        simd: V3,
-        out: &mut [f32],
-        (out_h, out_w, wq): (usize, usize, usize),
-        (phases, sub): (&[f32], usize),
-        kernel: &[f32],
-        bias: f32,
-    ) -> bool {
-        let r = K.div_ceil(2);
-        if !matches!(K, 3 | 5)
-            || W != N + r - 1
-            || kernel.len() != K * K
-            || out.len() != out_h * out_w
-        {
-            return false;
-        }
-        simd.vectorize(
-            #[inline(always)]
-            || {
-                let w: [[f32x8; K]; K] = std::array::from_fn(|ky| {
-                    std::array::from_fn(|kx| simd.splat_f32s(kernel[ky * K + kx]))
-                });
-                let (zeros, b) = ([0.0; W], simd.splat_f32s(bias));
-                let rows = out_h + r - 1;
-                let add = |a: f32x8, ky: usize, t: &[f32x8; K]| {
-                    simd.add_f32s(a, row_sum::<K>(simd, &w[ky], t))
-                };
-                for x in (0..out_w).step_by(N) {
-                    let n = (out_w - x).min(N);
-                    // `a0`, `a1`, `a2` (`K` = 5 only): output rows `q + 1 − R`, `q + 2 − R`,
-                    // `q + 3 − R` while padded rows `2q` and `2q + 1` are summed in (kernel
-                    // rows `K − 1`, `K − 3`, `K − 5` and the ones after); rows outside the
-                    // output are summed and dropped. Named, not an array, so that they stay
-                    // in registers.
-                    let (mut a0, mut a1, mut a2) = (b, b, b);
-                    for q in 0..rows {
-                        let even = taps_s2::<K, W>(phases, q * wq + x, sub, &zeros);
-                        a0 = add(a0, K - 1, &even);
-                        if K == 5 {
-                            a1 = add(a1, 2, &even);
-                            a2 = add(b, 0, &even);
-                        } else {
-                            a1 = add(b, 0, &even);
-                        }
-                        if let Some(oy) = (q + 1).checked_sub(r) {
-                            store(simd, out, oy * out_w + x, a0, n);
-                        }
-                        // The odd row: kernel rows 1 (and 3) of the younger output rows (the
-                        // last pair's only of rows past the output).
-                        if q + 1 < rows {
-                            let odd = taps_s2::<K, W>(phases, 2 * sub + q * wq + x, sub, &zeros);
-                            if K == 5 {
-                                a1 = add(a1, 3, &odd);
-                                a2 = add(a2, 1, &odd);
-                            } else {
-                                a1 = add(a1, 1, &odd);
-                            }
-                        }
-                        (a0, a1) = if K == 5 { (a1, a2) } else { (a1, b) };
+                        acc = std::array::from_fn(|i| acc[(i + 1) % K]);
                     }
                 }
             },
@@ -1416,7 +1294,6 @@ mod tests {
     }
 
     /// The stride-2 planes read in place ([`wide16::planes_s2`], where the CPU has AVX-512)
-    /// and the AVX2 ring on the phase split ([`rows8::ring_s2`], where the CPU has AVX2)
     /// against the phase split's narrow rows: the same bits at every padding a kernel takes,
     /// on sizes whose rows take one block or several, end mid-block, or are shorter than the
     /// kernel's reach (loads before a row's start, past its end, rows of padding).
@@ -1426,8 +1303,6 @@ mod tests {
         let mut cases = 0u32;
         #[cfg_attr(not(target_arch = "x86_64"), allow(unused_mut))] // counted on AVX-512
         let mut in_place = 0usize;
-        #[cfg_attr(not(target_arch = "x86_64"), allow(unused_mut))] // counted with AVX2
-        let mut avx2 = 0usize;
         let sizes = [
             (128, 128),
             (64, 64),
@@ -1457,7 +1332,7 @@ mod tests {
                     #[cfg(target_arch = "x86_64")]
                     if let Some(simd) = pulp::x86::V4::try_new() {
                         let data = (&both.input[..], &both.weights[..], &both.bias[..]);
-                        let mut b = both.narrow.clone();
+                        let mut b = both.narrow;
                         let (out, win) = (&mut b[..], &mut wide.windows);
                         let ran = match k {
                             3 => wide16::planes_s2::<3, 9>(simd, &g, data, out, win),
@@ -1465,34 +1340,6 @@ mod tests {
                         };
                         assert_eq!(ran, w >= 2 * LANES, "{g:?}");
                         in_place += usize::from(ran);
-                    }
-                    // The AVX2 ring (which the CPUs without AVX-512 take) on the first
-                    // channel's phase split, called itself, so that it cannot pass untried.
-                    #[cfg(target_arch = "x86_64")]
-                    if let Some(simd) = pulp::x86::V3::try_new() {
-                        let (hq, wq) = (g.phase_h(), g.phase_w());
-                        let sub = hq * wq;
-                        let mut phases = vec![0.0; 4 * sub + 2 * LANES + 8];
-                        for (y, row) in both.input[..h * w].chunks_exact(w).enumerate() {
-                            for (x, &v) in row.iter().enumerate() {
-                                let (py, px) = (y + pt, x + pl);
-                                if py < 2 * hq && px < 2 * wq {
-                                    let at = ((py % 2) * 2 + px % 2) * sub + py / 2 * wq + px / 2;
-                                    phases[at] = v;
-                                }
-                            }
-                        }
-                        let mut c = vec![f32::NAN; g.out_plane()];
-                        let (shape, kernel) = ((g.out_h, g.out_w, wq), &both.weights[..k * k]);
-                        let (p, b) = ((&phases[..], sub), both.bias[0]);
-                        let ran = match k {
-                            3 => rows8::ring_s2::<3, 9>(simd, &mut c, shape, p, kernel, b),
-                            _ => rows8::ring_s2::<5, 10>(simd, &mut c, shape, p, kernel, b),
-                        };
-                        let want = &both.narrow[..g.out_plane()];
-                        let same = c.iter().zip(want).all(|(x, y)| x.to_bits() == y.to_bits());
-                        assert!(ran && same, "{g:?}: the AVX2 stride-2 ring's bits differ");
-                        avx2 += 1;
                     }
                     cases += 1;
                 }
@@ -1503,11 +1350,7 @@ mod tests {
         if pulp::x86::V4::try_new().is_some() {
             assert!(in_place >= 30, "{in_place} shapes in place");
         }
-        #[cfg(target_arch = "x86_64")]
-        if pulp::x86::V3::try_new().is_some() {
-            assert_eq!(avx2, cases as usize, "the AVX2 ring ran on every shape");
-        }
-        let _ = (in_place, avx2);
+        let _ = in_place;
     }
 
     /// The stride-1 rows that load each padded row's taps once ([`wide16::rows_ring`] where
