@@ -626,6 +626,13 @@ fn rows_product_narrow(
         let (block, bias) = ((wb, bm), &bias[i0..]);
         let at = |j: usize| (i0 * ys + j, ys);
         for j in (0..full_wide).step_by(WIDE_N) {
+            // A last block of at most 4 rows (16 outputs of the first convolution: 6, 6, 4)
+            // sums only those: the same sums, without the two rows the packing pads.
+            if rows <= 4 {
+                let acc = block_sums::<4, WIDE_N>(&madd, block, x, xs, j);
+                store_block(&acc, rows, bias, y, at(j));
+                continue;
+            }
             let acc = block_sums::<AVX2_BLOCK_M, WIDE_N>(&madd, block, x, xs, j);
             store_block(&acc, rows, bias, y, at(j));
         }
