@@ -528,12 +528,16 @@ const LANES: usize = 16;
 
 /// The networks' square kernels (3 × 3 and 5 × 5) at stride 1 summed in registers on 8-value
 /// blocks, for x86-64 CPUs with AVX2 and without AVX-512 (pulp's `x86::V3`, safe code):
-/// [`wide16`]'s `rows_ring` on AVX2's 8 lanes. (Written on arrays for the compiler to
-/// vectorise, the same sums stayed scalar; each block read from its own `K²` taps, as
-/// `rows_out` does, was slower than the wide rows at stride 2, whose taps are not side by
-/// side.) Each output is the sum of the rows above (the
+/// [`wide16`]'s `rows_ring` on AVX2's 8 lanes. Each output is the sum of the rows above (the
 /// bias, then kernel row after kernel row, each `w₀·t₀ + w₁·t₁ + …` from the left, multiplies
 /// and adds apart): the same bits. A block past a row's end computes lanes it does not store.
+///
+/// Not used at stride 2: written on arrays for the compiler to vectorise, the same sums stayed
+/// scalar; each block read from its own `K²` taps, as `rows_out` does, was slower than the
+/// wide rows, whose taps are not side by side; and the same ring on the phase split (each
+/// padded row's taps loaded once) took 97 µs instead of 82 on the 128 × 128 3 × 3 layer, whose
+/// four phase planes (67 KB a channel) leave L1 while a column block walks down them, and
+/// gained 3 µs on the 32 × 32 5 × 5 one (docs/benchmarks.md).
 #[cfg(target_arch = "x86_64")]
 mod rows8 {
     use pulp::x86::V3;
