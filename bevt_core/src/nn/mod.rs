@@ -116,6 +116,26 @@ enum Step {
 }
 
 impl Step {
+    /// What the step computes, for the per-node timings ([`Runner::step_times`]).
+    fn label(&self) -> String {
+        match self {
+            Step::Conv { shape: s, kind, .. } => {
+                let what = match kind {
+                    ConvKind::Pointwise => "1 × 1".to_string(),
+                    ConvKind::Depthwise(_) => format!("depthwise {}×{}/{}", s.kh, s.kw, s.sh),
+                    ConvKind::Rows => format!("{}×{}/{} by rows", s.kh, s.kw, s.sh),
+                    ConvKind::General => format!("{}×{}/{} grouped", s.kh, s.kw, s.sh),
+                };
+                format!("conv {what}, {} → {} on {}×{}", s.c, s.m, s.h, s.w)
+            }
+            Step::Unary { f, .. } => format!("{f:?}"),
+            Step::Binary { op, .. } => format!("{op:?}"),
+            Step::MatMul { mkn, .. } => format!("matmul {mkn:?}"),
+            Step::MeanPool { len, .. } => format!("mean pool of {len}"),
+            Step::Transpose { shape, .. } => format!("transpose {shape:?}"),
+        }
+    }
+
     /// The slots the step reads and writes (a read operand may repeat).
     fn refs(&self) -> [Option<usize>; 4] {
         match *self {
@@ -998,6 +1018,10 @@ pub struct Runner {
     bufs: Vec<Vec<f32>>,
     col: Vec<f32>,
     dw: dwconv::Scratch,
+    /// Nanoseconds spent in each step over the timed runs, empty while not timing
+    /// ([`Runner::time_steps`]), and the number of timed runs.
+    step_ns: Vec<u64>,
+    runs: u64,
 }
 
 impl Runner {
@@ -1011,9 +1035,47 @@ impl Runner {
         Self {
             plan,
             bufs,
+            step_ns: Vec::new(),
+            runs: 0,
             col,
             dw: dwconv::Scratch::default(),
         }
+    }
+
+    /// Every step in order, timed when [`Self::time_steps`] is on.
+    fn run_steps(&mut self, plan: &Plan) {
+        if self.step_ns.len() != plan.steps.len() {
+            for step in &plan.steps {
+                self.step(step);
+            }
+            return;
+        }
+        self.runs += 1;
+        for (i, step) in plan.steps.iter().enumerate() {
+            let t0 = std::time::Instant::now();
+            self.step(step);
+            let ns = u64::try_from(t0.elapsed().as_nanos()).unwrap_or(u64::MAX);
+            self.step_ns[i] = self.step_ns[i].saturating_add(ns);
+        }
+    }
+
+    /// Starts timing each step of the runs from now on (from zero), or stops and forgets
+    /// the times. Off by default: a diagnostic (`verifier_passes nodes`, the per-node table
+    /// of docs/benchmarks.md), one clock read a step while on.
+    pub fn time_steps(&mut self, on: bool) {
+        self.step_ns = if on {
+            vec![0; self.plan.steps.len()]
+        } else {
+            Vec::new()
+        };
+        self.runs = 0;
+    }
+
+    /// The timed runs so far ([`Self::time_steps`]) and, per step in plan order, what it
+    /// computes and its time over those runs in nanoseconds; no steps while not timing.
+    pub fn step_times(&self) -> (u64, Vec<(String, u64)>) {
+        let steps = self.plan.steps.iter().map(Step::label);
+        (self.runs, steps.zip(self.step_ns.iter().copied()).collect())
     }
 
     /// The plan this runner runs.
@@ -1045,9 +1107,7 @@ impl Runner {
             }
             buf.copy_from_slice(data);
         }
-        for step in &plan.steps {
-            self.step(step);
-        }
+        self.run_steps(&plan);
         Ok(self.outputs())
     }
 
@@ -1086,9 +1146,7 @@ impl Runner {
             ));
         }
         std::mem::swap(&mut self.bufs[slot], input);
-        for step in &plan.steps {
-            self.step(step);
-        }
+        self.run_steps(&plan);
         std::mem::swap(&mut self.bufs[slot], input);
         Ok(self.outputs())
     }

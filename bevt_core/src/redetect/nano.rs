@@ -511,6 +511,18 @@ impl Backend {
     }
 }
 
+/// One network's node times ([`NanoVerifier::node_times`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NetTimes {
+    /// `template`, `search`, `cls`, `reg`, or those of the last other search size (`search
+    /// at N cells`, …).
+    pub name: String,
+    /// Runs since the timing started.
+    pub runs: u64,
+    /// Per node in plan order: what it computes, and its time over those runs (ns).
+    pub nodes: Vec<(String, u64)>,
+}
+
 /// NanoTrack v2 backbone + head (see the module doc).
 pub struct NanoVerifier {
     backend: Backend,
@@ -531,6 +543,56 @@ impl std::fmt::Debug for NanoVerifier {
 }
 
 impl NanoVerifier {
+    /// The native networks, named: `template`, `search`, `cls`, `reg`, and those of the last
+    /// other search size (`… at N cells`). None on ONNX Runtime.
+    fn native_nets(&mut self) -> Vec<(String, &mut Net)> {
+        let (template, search, cls, reg, sized) = match &mut self.backend {
+            Backend::Native {
+                template,
+                search,
+                cls,
+                reg,
+                sized,
+                ..
+            } => (template, search, cls, reg, sized),
+            #[cfg(feature = "cnn")]
+            Backend::Ort(_) => return Vec::new(),
+        };
+        let mut nets = vec![
+            ("template".to_string(), &mut **template),
+            ("search".to_string(), &mut **search),
+            ("cls".to_string(), &mut **cls),
+            ("reg".to_string(), &mut **reg),
+        ];
+        if let Some(z) = sized {
+            let c = z.cells;
+            nets.push((format!("search at {c} cells"), &mut z.search));
+            nets.push((format!("cls at {c} cells"), &mut z.cls));
+            nets.push((format!("reg at {c} cells"), &mut z.reg));
+        }
+        nets
+    }
+
+    /// Starts timing every node of the native networks' runs from now on, or stops
+    /// ([`nn::Runner::time_steps`]): a diagnostic, off by default.
+    pub fn time_nodes(&mut self, on: bool) {
+        for (_, net) in self.native_nets() {
+            net.runner.time_steps(on);
+        }
+    }
+
+    /// Per native network its node times ([`NetTimes`]). Empty on ONNX Runtime; no nodes
+    /// while not timing.
+    pub fn node_times(&mut self) -> Vec<NetTimes> {
+        self.native_nets()
+            .into_iter()
+            .map(|(name, net)| {
+                let (runs, nodes) = net.runner.step_times();
+                NetTimes { name, runs, nodes }
+            })
+            .collect()
+    }
+
     /// Loads both models (an empty path: the embedded NanoTrack v2 file), optimises the
     /// backbone for 127×127 and 255×255 inputs and the head, and checks them on a grey
     /// template and search crop — once per process and `(backbone, head)`: later verifiers
@@ -1419,6 +1481,43 @@ mod tests {
     /// around the centre, bit for bit, and NaN elsewhere, at every size the learned box can
     /// ask for (NanoTrack v2's head is windowed at each: none falls back to the whole maps
     /// unseen); at 16 cells they are the whole maps.
+    /// The node timer (`verifier_passes nodes`): off, no nodes; on, each network counts
+    /// the runs made since and names its nodes by what they compute; the times sum to more
+    /// than nothing; the results are the untimed run's bits; off again, nothing.
+    #[test]
+    fn timing_the_nodes_names_them_and_counts_the_runs() {
+        let (px0, size, c0, (w, h)) = synth(0);
+        let frame = Frame::packed(&px0, size.0, size.1, PixelFormat::Rgb8).unwrap();
+        let mut v = NanoVerifier::new("", "").unwrap();
+        v.set_template(&frame, c0, w, h).unwrap();
+        let side = 2.0 * context_side(w, h);
+        let untimed = v.score_maps_sized(&frame, c0, side, SEARCH_CELLS).unwrap();
+        let nodes = |v: &mut NanoVerifier, net: &str| {
+            let all = v.node_times();
+            all.into_iter()
+                .find(|n| n.name == net)
+                .map(|n| (n.runs, n.nodes))
+        };
+        assert_eq!(nodes(&mut v, "search").map(|n| n.1.len()), Some(0));
+        v.time_nodes(true);
+        let timed = v.score_maps_sized(&frame, c0, side, SEARCH_CELLS).unwrap();
+        assert_eq!(format!("{untimed:?}"), format!("{timed:?}"));
+        v.score_maps_sized(&frame, c0, side, SEARCH_CELLS).unwrap();
+        let Some((runs, search)) = nodes(&mut v, "search") else {
+            panic!("no search network")
+        };
+        assert_eq!(runs, 2);
+        assert!(search.len() > 30, "{} nodes", search.len());
+        assert_eq!(search[0].0, "conv 3×3/2 by rows, 3 → 16 on 255×255");
+        assert!(search
+            .iter()
+            .any(|n| n.0 == "conv depthwise 5×5/1, 240 → 240 on 16×16"));
+        assert!(search.iter().map(|n| n.1).sum::<u64>() > 0);
+        assert_eq!(nodes(&mut v, "template").map(|n| n.0), Some(0));
+        v.time_nodes(false);
+        assert_eq!(nodes(&mut v, "search"), Some((0, Vec::new())));
+    }
+
     #[test]
     fn centre_maps_are_the_whole_maps_bits_at_the_centre() {
         let (px0, size, c0, (w, h)) = synth(0);
