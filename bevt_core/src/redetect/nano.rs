@@ -515,7 +515,7 @@ impl Backend {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct NetTimes {
     /// `template`, `search`, `cls`, `reg`, or those of the last other search size (`search
-    /// at N cells`, …).
+    /// at N cells`, …, and its centre window's `cls at N cells, centre`, …).
     pub name: String,
     /// Runs since the timing started.
     pub runs: u64,
@@ -544,7 +544,8 @@ impl std::fmt::Debug for NanoVerifier {
 
 impl NanoVerifier {
     /// The native networks, named: `template`, `search`, `cls`, `reg`, and those of the last
-    /// other search size (`… at N cells`). None on ONNX Runtime.
+    /// other search size (`… at N cells`, its centre window's branches `…, centre`). None on
+    /// ONNX Runtime.
     fn native_nets(&mut self) -> Vec<(String, &mut Net)> {
         let (template, search, cls, reg, sized) = match &mut self.backend {
             Backend::Native {
@@ -569,12 +570,17 @@ impl NanoVerifier {
             nets.push((format!("search at {c} cells"), &mut z.search));
             nets.push((format!("cls at {c} cells"), &mut z.cls));
             nets.push((format!("reg at {c} cells"), &mut z.reg));
+            if let Some((cls, reg)) = &mut z.centre {
+                nets.push((format!("cls at {c} cells, centre"), cls));
+                nets.push((format!("reg at {c} cells, centre"), reg));
+            }
         }
         nets
     }
 
-    /// Starts timing every node of the native networks' runs from now on, or stops
-    /// ([`nn::Runner::time_steps`]): a diagnostic, off by default.
+    /// Starts timing every node of the native networks' runs from now on (from zero), or
+    /// stops ([`nn::Runner::time_steps`]): a diagnostic, off by default. It applies to the
+    /// networks built so far: those of a search size first asked for later start untimed.
     pub fn time_nodes(&mut self, on: bool) {
         for (_, net) in self.native_nets() {
             net.runner.time_steps(on);
@@ -1514,6 +1520,13 @@ mod tests {
             .any(|n| n.0 == "conv depthwise 5×5/1, 240 → 240 on 16×16"));
         assert!(search.iter().map(|n| n.1).sum::<u64>() > 0);
         assert_eq!(nodes(&mut v, "template").map(|n| n.0), Some(0));
+        // Another search size's networks are listed once built, and timed from then on.
+        let small = side * (16 * 12 - 1) as f32 / (16 * SEARCH_CELLS - 1) as f32;
+        v.score_maps_sized(&frame, c0, small, 12).unwrap();
+        v.time_nodes(true);
+        v.score_maps_sized(&frame, c0, small, 12).unwrap();
+        assert_eq!(nodes(&mut v, "search at 12 cells").map(|n| n.0), Some(1));
+        assert_eq!(nodes(&mut v, "search").map(|n| n.0), Some(0));
         v.time_nodes(false);
         assert_eq!(nodes(&mut v, "search"), Some((0, Vec::new())));
     }
