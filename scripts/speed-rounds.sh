@@ -14,6 +14,9 @@
 #   BEVT       the bevt binary (default target/release/bevt, built by cargo when missing)
 #   PEER_VENV  venv with scripts/requirements-peers.txt (default target/venv-peers, created
 #              when it cannot import cv2; the project's .venv belongs to scripts/python-env.sh)
+#   WITHOUT    sequences left out of the second comparison, split at commas (default wakeboard4:
+#              issue 19 sets its targets with and without it, since it flips on small changes;
+#              empty for none)
 #   BEVT_ARGS  more `bevt eval` arguments for both of our runs, split at spaces (e.g.
 #              "--set redetection.verifier_filter_hint=true": an option with and without the rules)
 # Boxes and logs of every run stay in a new directory under target/ (printed); nothing else
@@ -53,6 +56,7 @@ mkdir -p target
 out=$(mktemp -d target/speed-rounds.XXXXXX)
 rules_off=(--set track_state.drift_check_frames=0 --set track_state.verify_low_confidence=false)
 read -r -a extra <<<"${BEVT_ARGS:-}"
+without=${WITHOUT-wakeboard4}
 
 echo "speed-rounds: $rounds rounds on $dataset, results in $out"
 echo "machine: $(nproc) cores, $(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -n 1)"
@@ -91,7 +95,7 @@ run() {
   esac || { echo "speed-rounds: $which on $seq failed, see $dir.log" >&2; exit 1; }
   local kind=bevt
   [ "$which" = nano ] && kind=peer
-  echo "$which $(seconds "$kind" "$dir")" >>"$out/round_$r.txt"
+  echo "$which $(seconds "$kind" "$dir") $seq" >>"$out/round_$r.txt"
 }
 
 # The three trackers take turns sequence by sequence (in a rotating order), so a change of the
@@ -134,3 +138,22 @@ awk '
     printf "without the drift rules against TrackerNano: %.2fx of the means; per round median %.2fx\n", o / n, median(ro, k)
     printf "the drift rules cost: %.1f %% of the means; per round median %.1f %%, %.1f to %.1f %% (issue 20: <= 10 %%)\n", 100 * (1 - d / o), median(rc, k), lo3, hi3
   }' "$out/fps.txt"
+# Per sequence over all rounds (frames / seconds of each tracker), and the default against
+# TrackerNano without the WITHOUT sequences, computed as above from each round's own sums.
+[ -z "$without" ] || awk -v without="$without" '
+  function median(a, k,    i, j, t) {
+    for (i = 2; i <= k; i++) for (j = i; j > 1 && a[j - 1] > a[j]; j--) { t = a[j]; a[j] = a[j - 1]; a[j - 1] = t }
+    return k % 2 ? a[(k + 1) / 2] : (a[k / 2] + a[k / 2 + 1]) / 2
+  }
+  BEGIN { n = split(without, w, ","); for (i = 1; i <= n; i++) skip[w[i]] = 1 }
+  FNR == 1 { k++ }
+  { f[$1, $4] += $2; t[$1, $4] += $3; seen[$4] = 1
+    if (!($4 in skip)) { rf[k, $1] += $2; rt[k, $1] += $3 } }
+  END {
+    printf "%-14s %10s %13s %7s\n", "sequence", "default", "TrackerNano", "ratio"
+    for (s in seen) printf "%-14s %10.1f %13.1f %6.2fx\n", s, f["default", s] / t["default", s], f["nano", s] / t["nano", s], (f["default", s] / t["default", s]) / (f["nano", s] / t["nano", s]) | "sort"
+    close("sort")
+    for (i = 1; i <= k; i++) { d = rf[i, "default"] / rt[i, "default"]; m = rf[i, "nano"] / rt[i, "nano"]; sd += d; sn += m; r[i] = d / m
+      lo = (i == 1 || r[i] < lo) ? r[i] : lo; hi = (i == 1 || r[i] > hi) ? r[i] : hi }
+    printf "default against TrackerNano without %s: %.2fx of the means (%.1f against %.1f fps); per round median %.2fx, %.2f-%.2fx\n", without, sd / sn, sd / k, sn / k, median(r, k), lo, hi
+  }' "$out"/round_*.txt
