@@ -8,6 +8,7 @@
 # are compared with each other; docs/benchmarks.md quotes this script's.
 #
 # Usage: scripts/speed-rounds.sh [ROUNDS] [DATASET]
+#        scripts/speed-rounds.sh --summarise DIR   (the summary of an earlier run's DIR again)
 #   ROUNDS   rounds of the three runs (default 5)
 #   DATASET  default ../shared/datasets/uav123_10fps_dev
 # Environment:
@@ -23,6 +24,65 @@
 # is written.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# WITHOUT as given must name sequences that ran; its default only where wakeboard4 did.
+without=${WITHOUT-wakeboard4}
+strict=${WITHOUT+1}
+# The summary of the rounds in "$out" (fps.txt: a round's three pooled fps a line;
+# round_R.txt: "tracker frames seconds sequence" a run), leaving out the $without sequences in its
+# last line. Means over the rounds, and the per-round ratios (each round's runs ran minutes apart
+# at most): their median and range show how much the VM's drift moves the ratio of the means.
+summarise() {
+  awk '
+    function median(a, k,    i, j, t) {
+      for (i = 2; i <= k; i++) for (j = i; j > 1 && a[j - 1] > a[j]; j--) { t = a[j]; a[j] = a[j - 1]; a[j - 1] = t }
+      return k % 2 ? a[(k + 1) / 2] : (a[k / 2] + a[k / 2 + 1]) / 2
+    }
+    { d += $1; o += $2; n += $3; k++; rn[k] = $1 / $3; ro[k] = $2 / $3; rc[k] = 100 * (1 - $1 / $2)
+      lo1 = (k == 1 || rn[k] < lo1) ? rn[k] : lo1; hi1 = (k == 1 || rn[k] > hi1) ? rn[k] : hi1
+      lo3 = (k == 1 || rc[k] < lo3) ? rc[k] : lo3; hi3 = (k == 1 || rc[k] > hi3) ? rc[k] : hi3 }
+    END {
+      d /= k; o /= k; n /= k
+      printf "mean   %10.1f %10.1f %13.1f\n", d, o, n
+      printf "default against TrackerNano: %.2fx of the means; per round median %.2fx, %.2f-%.2fx (issue 19: >= 1.0x)\n", d / n, median(rn, k), lo1, hi1
+      printf "without the drift rules against TrackerNano: %.2fx of the means; per round median %.2fx\n", o / n, median(ro, k)
+      printf "the drift rules cost: %.1f %% of the means; per round median %.1f %%, %.1f to %.1f %% (issue 20: <= 10 %%)\n", 100 * (1 - d / o), median(rc, k), lo3, hi3
+    }' "$out/fps.txt"
+  # Per sequence over all rounds (frames / seconds of each tracker), and the default against
+  # TrackerNano without the WITHOUT sequences, computed as above from each round's own sums.
+  [ -z "$without" ] || awk -v without="$without" -v strict="${strict:-0}" '
+    function median(a, k,    i, j, t) {
+      for (i = 2; i <= k; i++) for (j = i; j > 1 && a[j - 1] > a[j]; j--) { t = a[j]; a[j] = a[j - 1]; a[j - 1] = t }
+      return k % 2 ? a[(k + 1) / 2] : (a[k / 2] + a[k / 2 + 1]) / 2
+    }
+    BEGIN { n = split(without, w, ","); for (i = 1; i <= n; i++) skip[w[i]] = 1 }
+    FNR == 1 { k++ }
+    { f[$1, $4] += $2; t[$1, $4] += $3; seen[$4] = 1
+      if (!($4 in skip)) { rf[k, $1] += $2; rt[k, $1] += $3 } }
+    END {
+      for (x in skip) if (!(x in seen)) {
+        if (!strict) exit
+        printf "speed-rounds: WITHOUT names %s, which no round ran\n", x > "/dev/stderr"; bad = 1
+      }
+      if (!bad && !rt[1, "default"]) { print "speed-rounds: WITHOUT leaves no sequence" > "/dev/stderr"; bad = 1 }
+      if (bad) exit 2
+      printf "%-14s %10s %13s %7s\n", "sequence", "default", "TrackerNano", "ratio"
+      for (s in seen) printf "%-14s %10.1f %13.1f %6.2fx\n", s, f["default", s] / t["default", s], f["nano", s] / t["nano", s], (f["default", s] / t["default", s]) / (f["nano", s] / t["nano", s]) | "sort"
+      close("sort")
+      for (i = 1; i <= k; i++) { d = rf[i, "default"] / rt[i, "default"]; m = rf[i, "nano"] / rt[i, "nano"]; sd += d; sn += m; r[i] = d / m
+        lo = (i == 1 || r[i] < lo) ? r[i] : lo; hi = (i == 1 || r[i] > hi) ? r[i] : hi }
+      printf "default against TrackerNano without %s: %.2fx of the means (%.1f against %.1f fps); per round median %.2fx, %.2f-%.2fx\n", without, sd / sn, sd / k, sn / k, median(r, k), lo, hi
+    }' "$out"/round_*.txt
+}
+
+if [ "${1:-}" = --summarise ]; then
+  out=${2:-}
+  if [ -z "$out" ] || [ ! -s "$out/fps.txt" ] || ! ls "$out"/round_*.txt >/dev/null 2>&1; then
+    echo "speed-rounds: --summarise needs the folder of an earlier run (its fps.txt and round_*.txt), got '$out'" >&2
+    exit 2
+  fi
+  summarise
+  exit
+fi
 
 rounds=${1:-5}
 dataset=${2:-../shared/datasets/uav123_10fps_dev}
@@ -36,6 +96,18 @@ fi
 if [ ! -f "$dataset/sequences.json" ]; then
   echo "speed-rounds: no dataset at $dataset (sequences.json missing)" >&2
   exit 2
+fi
+if [ -n "$without" ]; then
+  python3 - "$dataset/sequences.json" "$without" "${strict:-0}" <<'PY' || exit 2
+import json, sys
+names = {s["name"] for s in json.load(open(sys.argv[1]))["sequences"]}
+left = set(sys.argv[2].split(","))
+unknown = sorted(left - names)
+if unknown and sys.argv[3] == "1":
+    sys.exit(f"speed-rounds: WITHOUT names sequences not in the dataset: {unknown}")
+if not unknown and not names - left:
+    sys.exit("speed-rounds: WITHOUT leaves no sequence")
+PY
 fi
 
 bevt=${BEVT:-}
@@ -56,7 +128,6 @@ mkdir -p target
 out=$(mktemp -d target/speed-rounds.XXXXXX)
 rules_off=(--set track_state.drift_check_frames=0 --set track_state.verify_low_confidence=false)
 read -r -a extra <<<"${BEVT_ARGS:-}"
-without=${WITHOUT-wakeboard4}
 
 echo "speed-rounds: $rounds rounds on $dataset, results in $out"
 echo "machine: $(nproc) cores, $(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -n 1)"
@@ -121,39 +192,4 @@ for r in $(seq 1 "$rounds"); do
   echo "$d $o $n" >>"$out/fps.txt"
 done
 echo "end: $(date -u '+%Y-%m-%d %H:%M:%S UTC'), load $(cut -d' ' -f1-3 /proc/loadavg)"
-# Means over the rounds, and the per-round ratios (each round's runs ran minutes apart at most):
-# their median and range show how much the VM's drift moves the ratio of the means.
-awk '
-  function median(a, k,    i, j, t) {
-    for (i = 2; i <= k; i++) for (j = i; j > 1 && a[j - 1] > a[j]; j--) { t = a[j]; a[j] = a[j - 1]; a[j - 1] = t }
-    return k % 2 ? a[(k + 1) / 2] : (a[k / 2] + a[k / 2 + 1]) / 2
-  }
-  { d += $1; o += $2; n += $3; k++; rn[k] = $1 / $3; ro[k] = $2 / $3; rc[k] = 100 * (1 - $1 / $2)
-    lo1 = (k == 1 || rn[k] < lo1) ? rn[k] : lo1; hi1 = (k == 1 || rn[k] > hi1) ? rn[k] : hi1
-    lo3 = (k == 1 || rc[k] < lo3) ? rc[k] : lo3; hi3 = (k == 1 || rc[k] > hi3) ? rc[k] : hi3 }
-  END {
-    d /= k; o /= k; n /= k
-    printf "mean   %10.1f %10.1f %13.1f\n", d, o, n
-    printf "default against TrackerNano: %.2fx of the means; per round median %.2fx, %.2f-%.2fx (issue 19: >= 1.0x)\n", d / n, median(rn, k), lo1, hi1
-    printf "without the drift rules against TrackerNano: %.2fx of the means; per round median %.2fx\n", o / n, median(ro, k)
-    printf "the drift rules cost: %.1f %% of the means; per round median %.1f %%, %.1f to %.1f %% (issue 20: <= 10 %%)\n", 100 * (1 - d / o), median(rc, k), lo3, hi3
-  }' "$out/fps.txt"
-# Per sequence over all rounds (frames / seconds of each tracker), and the default against
-# TrackerNano without the WITHOUT sequences, computed as above from each round's own sums.
-[ -z "$without" ] || awk -v without="$without" '
-  function median(a, k,    i, j, t) {
-    for (i = 2; i <= k; i++) for (j = i; j > 1 && a[j - 1] > a[j]; j--) { t = a[j]; a[j] = a[j - 1]; a[j - 1] = t }
-    return k % 2 ? a[(k + 1) / 2] : (a[k / 2] + a[k / 2 + 1]) / 2
-  }
-  BEGIN { n = split(without, w, ","); for (i = 1; i <= n; i++) skip[w[i]] = 1 }
-  FNR == 1 { k++ }
-  { f[$1, $4] += $2; t[$1, $4] += $3; seen[$4] = 1
-    if (!($4 in skip)) { rf[k, $1] += $2; rt[k, $1] += $3 } }
-  END {
-    printf "%-14s %10s %13s %7s\n", "sequence", "default", "TrackerNano", "ratio"
-    for (s in seen) printf "%-14s %10.1f %13.1f %6.2fx\n", s, f["default", s] / t["default", s], f["nano", s] / t["nano", s], (f["default", s] / t["default", s]) / (f["nano", s] / t["nano", s]) | "sort"
-    close("sort")
-    for (i = 1; i <= k; i++) { d = rf[i, "default"] / rt[i, "default"]; m = rf[i, "nano"] / rt[i, "nano"]; sd += d; sn += m; r[i] = d / m
-      lo = (i == 1 || r[i] < lo) ? r[i] : lo; hi = (i == 1 || r[i] > hi) ? r[i] : hi }
-    printf "default against TrackerNano without %s: %.2fx of the means (%.1f against %.1f fps); per round median %.2fx, %.2f-%.2fx\n", without, sd / sn, sd / k, sn / k, median(r, k), lo, hi
-  }' "$out"/round_*.txt
+summarise

@@ -470,6 +470,29 @@ fn the_speed_scripts_refuse_bad_arguments_before_any_work() {
         assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains(says), "{args:?}: {err}");
     }
+    // `WITHOUT` names sequences of the dataset and leaves one at least; unset, it leaves out
+    // wakeboard4 only where there is one (this dataset has none: the run goes on to `BEVT`).
+    for (without, says) in [
+        (
+            Some("good,nope"),
+            "WITHOUT names sequences not in the dataset: ['nope']",
+        ),
+        (Some("good,corrupt,badanno"), "WITHOUT leaves no sequence"),
+        (None, "no_such_bevt is not an executable"),
+    ] {
+        let mut cmd = std::process::Command::new("bash");
+        cmd.arg(root.join("scripts/speed-rounds.sh"))
+            .args(["2", data])
+            .env("BEVT", tmp.join("no_such_bevt"));
+        match without {
+            Some(w) => cmd.env("WITHOUT", w),
+            None => cmd.env_remove("WITHOUT"),
+        };
+        let out = cmd.output().expect("bash runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{without:?}: {err}");
+        assert!(err.contains(says), "{without:?}: {err}");
+    }
     assert_eq!(
         rounds_dirs(),
         before,
@@ -498,6 +521,94 @@ fn the_speed_scripts_refuse_bad_arguments_before_any_work() {
         assert!(!out_dir.exists(), "{args:?} created the output folder");
     }
     let _ = std::fs::remove_dir_all(&tmp);
+}
+
+/// `scripts/speed-rounds.sh --summarise` reads a run's folder back: the means and per-round
+/// ratios, each sequence's pooled fps beside TrackerNano's, and the ratio without wakeboard4
+/// (issue 19's targets are with and without it) from each round's own sums, here on three
+/// rounds whose figures are worked out by hand; a `WITHOUT` naming a sequence no round ran, or
+/// leaving none, is refused, as is a folder that holds no run.
+#[test]
+fn the_speed_summary_reads_the_rounds_with_and_without_wakeboard4() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+    let dir = temp_dir("speed_summary");
+    // Per round: (default seconds on `a`, TrackerNano seconds on `a`); wakeboard4 takes the
+    // default 2.0 s and TrackerNano 1.0 s every round; 100 frames each.
+    let rounds = [(1.0, 1.25), (0.625, 1.0), (0.5, 1.0)];
+    let mut fps = String::new();
+    for (r, (da, na)) in rounds.iter().enumerate() {
+        let lines = format!(
+            "default 100 {da} a\nrules_off 100 {da} a\nnano 100 {na} a\n\
+             nano 100 1.0 wakeboard4\ndefault 100 2.0 wakeboard4\nrules_off 100 2.0 wakeboard4\n"
+        );
+        std::fs::write(dir.join(format!("round_{}.txt", r + 1)), lines).unwrap();
+        let (d, n) = (200.0 / (da + 2.0), 200.0 / (na + 1.0));
+        fps.push_str(&format!("{d:.1} {d:.1} {n:.1}\n"));
+    }
+    std::fs::write(dir.join("fps.txt"), fps).unwrap();
+    let summarise = |without: Option<&str>, folder: &Path| {
+        let mut cmd = std::process::Command::new("bash");
+        cmd.arg(root.join("scripts/speed-rounds.sh"))
+            .arg("--summarise")
+            .arg(folder);
+        match without {
+            Some(w) => cmd.env("WITHOUT", w),
+            None => cmd.env_remove("WITHOUT"),
+        };
+        let out = cmd.output().expect("bash runs");
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, out, err) = summarise(None, &dir);
+    assert_eq!(code, Some(0), "{err}");
+    // With wakeboard4: 66.7, 76.2, 80.0 against 88.9, 100.0, 100.0.
+    assert!(
+        out.contains("default against TrackerNano: 0.77x of the means"),
+        "{out}"
+    );
+    // a: 300 frames in 2.125 s against 3.25 s; wakeboard4: 6.0 s against 3.0 s.
+    assert!(
+        out.contains("a                   141.2          92.3   1.53x"),
+        "{out}"
+    );
+    assert!(
+        out.contains("wakeboard4           50.0         100.0   0.50x"),
+        "{out}"
+    );
+    // Without it, round by round: 100 / 80, 160 / 100, 200 / 100.
+    assert!(
+        out.contains(
+            "default against TrackerNano without wakeboard4: 1.64x of the means \
+             (153.3 against 93.3 fps); per round median 1.60x, 1.25-2.00x"
+        ),
+        "{out}"
+    );
+    let (code, out, _) = summarise(Some(""), &dir);
+    assert_eq!(code, Some(0));
+    assert!(
+        !out.contains("without wakeboard4") && !out.contains("sequence "),
+        "{out}"
+    );
+    for (without, says) in [
+        ("nope", "WITHOUT names nope, which no round ran"),
+        ("a,wakeboard4", "WITHOUT leaves no sequence"),
+    ] {
+        let (code, _, err) = summarise(Some(without), &dir);
+        assert_eq!(code, Some(2), "{without}: {err}");
+        assert!(err.contains(says), "{without}: {err}");
+    }
+    let empty = dir.join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let (code, _, err) = summarise(None, &empty);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("--summarise needs the folder of an earlier run"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The selection protocol's scripts (docs/results.md#selection-protocol): `protocol-runs.sh`
