@@ -31,12 +31,14 @@ strict=${WITHOUT+1}
 # round_R.txt: "tracker frames seconds sequence" a run), leaving out the $without sequences in its
 # last line. Means over the rounds, and the per-round ratios (each round's runs ran minutes apart
 # at most): their median and range show how much the VM's drift moves the ratio of the means.
+# The median of a[1..k] (an insertion sort), for both summaries' awk programs.
+median='
+  function median(a, k,    i, j, t) {
+    for (i = 2; i <= k; i++) for (j = i; j > 1 && a[j - 1] > a[j]; j--) { t = a[j]; a[j] = a[j - 1]; a[j - 1] = t }
+    return k % 2 ? a[(k + 1) / 2] : (a[k / 2] + a[k / 2 + 1]) / 2
+  }'
 summarise() {
-  awk '
-    function median(a, k,    i, j, t) {
-      for (i = 2; i <= k; i++) for (j = i; j > 1 && a[j - 1] > a[j]; j--) { t = a[j]; a[j] = a[j - 1]; a[j - 1] = t }
-      return k % 2 ? a[(k + 1) / 2] : (a[k / 2] + a[k / 2 + 1]) / 2
-    }
+  awk "$median"'
     { d += $1; o += $2; n += $3; k++; rn[k] = $1 / $3; ro[k] = $2 / $3; rc[k] = 100 * (1 - $1 / $2)
       lo1 = (k == 1 || rn[k] < lo1) ? rn[k] : lo1; hi1 = (k == 1 || rn[k] > hi1) ? rn[k] : hi1
       lo3 = (k == 1 || rc[k] < lo3) ? rc[k] : lo3; hi3 = (k == 1 || rc[k] > hi3) ? rc[k] : hi3 }
@@ -49,11 +51,7 @@ summarise() {
     }' "$out/fps.txt"
   # Per sequence over all rounds (frames / seconds of each tracker), and the default against
   # TrackerNano without the WITHOUT sequences, computed as above from each round's own sums.
-  [ -z "$without" ] || awk -v without="$without" -v strict="${strict:-0}" '
-    function median(a, k,    i, j, t) {
-      for (i = 2; i <= k; i++) for (j = i; j > 1 && a[j - 1] > a[j]; j--) { t = a[j]; a[j] = a[j - 1]; a[j - 1] = t }
-      return k % 2 ? a[(k + 1) / 2] : (a[k / 2] + a[k / 2 + 1]) / 2
-    }
+  [ -z "$without" ] || awk -v without="$without" -v strict="${strict:-0}" "$median"'
     BEGIN { n = split(without, w, ","); for (i = 1; i <= n; i++) skip[w[i]] = 1 }
     FNR == 1 { k++ }
     { f[$1, $4] += $2; t[$1, $4] += $3; seen[$4] = 1
