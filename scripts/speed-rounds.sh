@@ -27,16 +27,16 @@ cd "$(dirname "$0")/.."
 # WITHOUT as given must name sequences that ran; its default only where wakeboard4 did.
 without=${WITHOUT-wakeboard4}
 strict=${WITHOUT+1}
-# The summary of the rounds in "$out" (fps.txt: a round's three pooled fps a line;
-# round_R.txt: "tracker frames seconds sequence" a run), leaving out the $without sequences in its
-# last line. Means over the rounds, and the per-round ratios (each round's runs ran minutes apart
-# at most): their median and range show how much the VM's drift moves the ratio of the means.
 # The median of a[1..k] (an insertion sort), for both summaries' awk programs.
 median='
   function median(a, k,    i, j, t) {
     for (i = 2; i <= k; i++) for (j = i; j > 1 && a[j - 1] > a[j]; j--) { t = a[j]; a[j] = a[j - 1]; a[j - 1] = t }
     return k % 2 ? a[(k + 1) / 2] : (a[k / 2] + a[k / 2 + 1]) / 2
   }'
+# The summary of the rounds in "$out" (fps.txt: a round's three pooled fps a line;
+# round_R.txt: "tracker frames seconds sequence" a run), leaving out the $without sequences in its
+# last line. Means over the rounds, and the per-round ratios (each round's runs ran minutes apart
+# at most): their median and range show how much the VM's drift moves the ratio of the means.
 summarise() {
   awk "$median"'
     { d += $1; o += $2; n += $3; k++; rn[k] = $1 / $3; ro[k] = $2 / $3; rc[k] = 100 * (1 - $1 / $2)
