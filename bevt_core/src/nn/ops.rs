@@ -371,6 +371,7 @@ pub(super) struct ConvShape {
 
 /// `out[ox]` = the input value of plane `src` under tap `(ky, kx)` of output `(oy, ox)`,
 /// zero outside (`out` holds one output row).
+#[inline(always)] // into each clone of `im2col` and `im2col_row`
 fn tap_row(s: &ConvShape, src: &[f32], (ky, kx): (usize, usize), oy: usize, out: &mut [f32]) {
     let y = (oy * s.sh + ky).checked_sub(s.pt).filter(|&y| y < s.h);
     let Some(y) = y else {
@@ -424,6 +425,7 @@ pub(super) fn im2col(s: &ConvShape, cg: usize, x: &[f32], col: &mut [f32]) {
 }
 
 /// [`im2col`] of output row `oy` alone: `col[(ci·kh + ky)·kw + kx][ox]`, all `s.c` channels.
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))] // AVX2 clone: the stride-2 rows' shuffles 8 wide
 pub(super) fn im2col_row(s: &ConvShape, x: &[f32], oy: usize, col: &mut [f32]) {
     let mut rows = col.chunks_exact_mut(s.ow);
     for src in x.chunks_exact(s.h * s.w).take(s.c) {
@@ -447,6 +449,12 @@ const WIDE_N: usize = 16;
 /// Rows of a packed block on CPUs with AVX2 and without the AVX-512 kernel: 6 × 16 sums in
 /// 12 of AVX2's 16 registers.
 const AVX2_BLOCK_M: usize = 6;
+/// The most rows of a block ([`block_rows`]): the sums of [`rows_product_narrow`]'s last columns.
+const TAIL_ROWS: usize = if BLOCK_M > AVX2_BLOCK_M {
+    BLOCK_M
+} else {
+    AVX2_BLOCK_M
+};
 
 /// Columns of the input a 1 × 1 convolution copies together for [`rows_product`]: about
 /// 16 KB of input (`k` rows), in whole blocks of 32 (the AVX-512 kernel's widest step), at
@@ -645,12 +653,21 @@ fn rows_product_narrow(
                 store_block(&acc, rows, bias, y, at(j));
             }
         }
+        // The last columns (fewer than 8) one at a time, the block's rows side by side: each
+        // row's sum over `p` in order as before, but the rows' chains of multiply-adds in
+        // flight together. Row after row, each sum waited on its own multiply-adds' latency:
+        // the head's read points (n = 9, 17, 25: one column left each) and the excitation
+        // layers' pooled vectors (n = 1) spent 15 % of this kernel's time here.
         for j in full..n {
-            for (i, &b) in bias.iter().enumerate().take(rows) {
-                let mut a = 0.0f32;
-                for (p, w) in wb.chunks_exact(bm).enumerate() {
-                    a = madd(w[i], x[p * xs + j], a);
+            let mut acc = [0.0f32; TAIL_ROWS];
+            let acc = &mut acc[..rows];
+            for (p, w) in wb.chunks_exact(bm).enumerate() {
+                let v = x[p * xs + j];
+                for (a, &w) in acc.iter_mut().zip(w) {
+                    *a = madd(w, v, *a);
                 }
+            }
+            for (i, (a, &b)) in acc.iter().zip(bias).enumerate() {
                 y[(i0 + i) * ys + j] = a + b;
             }
         }
