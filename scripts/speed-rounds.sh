@@ -2,10 +2,12 @@
 # Back-to-back speed rounds on the dev set, one thread each: the default, the default without
 # the drift rules, and OpenCV TrackerNano (scripts/nanotrack_peer.py, NanoTrack v2), taking
 # turns sequence by sequence, ROUNDS times. Prints every round's pooled fps (frames / tracking
-# time, decoding excluded for all three), the means, the default against TrackerNano (issue 19
-# asks >= 1.0x) and what the drift rules cost (issue 20 allows 10 %). These VMs' speed changes
-# by tens of percent within seconds, hence the turns by sequence, and only figures of one run
-# are compared with each other; docs/benchmarks.md quotes this script's.
+# time, decoding excluded for all three and done on the tracking thread between the timed
+# calls, as the peer's harness does: `bevt eval --decode inline`), the means, the default
+# against TrackerNano (issue 19 asks >= 1.0x) and what the drift rules cost (issue 20 allows
+# 10 %). These VMs' speed changes by tens of percent within seconds, hence the turns by
+# sequence, and only figures of one run are compared with each other; docs/benchmarks.md
+# quotes this script's.
 #
 # Usage: scripts/speed-rounds.sh [ROUNDS] [DATASET]
 #        scripts/speed-rounds.sh --summarise DIR   (the summary of an earlier run's DIR again)
@@ -18,6 +20,8 @@
 #   WITHOUT    sequences left out of the second comparison, split at commas (default wakeboard4:
 #              issue 19 sets its targets with and without it, since it flips on small changes;
 #              empty for none)
+#   DECODE     where our runs decode (default inline; `ahead`, a thread beside the tracker, is
+#              how runs before 2026-12-07 were timed: it costs the tracker about 2 % here)
 #   BEVT_ARGS  more `bevt eval` arguments for both of our runs, split at spaces (e.g.
 #              "--set redetection.verifier_filter_hint=true": an option with and without the rules)
 # Boxes and logs of every run stay in a new directory under target/ (printed); nothing else
@@ -91,6 +95,11 @@ if [ "$rounds" -gt 100 ]; then
   echo "speed-rounds: at most 100 rounds (about 1 minute each), got $rounds" >&2
   exit 2
 fi
+decode=${DECODE:-inline}
+case "$decode" in
+  inline | ahead) ;;
+  *) echo "speed-rounds: DECODE must be 'inline' or 'ahead', got '$decode'" >&2; exit 2 ;;
+esac
 if [ ! -f "$dataset/sequences.json" ]; then
   echo "speed-rounds: no dataset at $dataset (sequences.json missing)" >&2
   exit 2
@@ -131,6 +140,7 @@ echo "speed-rounds: $rounds rounds on $dataset, results in $out"
 echo "machine: $(nproc) cores, $(lscpu 2>/dev/null | sed -n 's/^Model name: *//p' | head -n 1)"
 echo "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)$(git diff --quiet 2>/dev/null || echo ' (with uncommitted changes)'), binary $bevt"
 echo "start: $(date -u '+%Y-%m-%d %H:%M:%S UTC'), load $(cut -d' ' -f1-3 /proc/loadavg)"
+echo "our runs decode: $decode"
 [ -z "${BEVT_ARGS:-}" ] || echo "our runs with: $BEVT_ARGS"
 
 # The tracking seconds and frames of one run: bevt's summary.json (frames / fps per sequence),
@@ -156,9 +166,9 @@ sequences=$("$venv/bin/python" -c 'import json, sys; print(" ".join(s["name"] fo
 run() {
   local which=$1 seq=$2 dir="$out/r${r}_$1_$2"
   case "$which" in
-    default) "$bevt" eval --dataset "$dataset" --out "$dir" --threads 1 --sequences "$seq" \
+    default) "$bevt" eval --dataset "$dataset" --out "$dir" --threads 1 --decode "$decode" --sequences "$seq" \
       ${extra[@]+"${extra[@]}"} >"$dir.log" 2>&1 ;;
-    rules_off) "$bevt" eval --dataset "$dataset" --out "$dir" --threads 1 --sequences "$seq" \
+    rules_off) "$bevt" eval --dataset "$dataset" --out "$dir" --threads 1 --decode "$decode" --sequences "$seq" \
       ${extra[@]+"${extra[@]}"} "${rules_off[@]}" >"$dir.log" 2>&1 ;;
     nano) "$venv/bin/python" scripts/nanotrack_peer.py --sequences "$seq" "$dataset" "$dir" >"$dir.log" 2>&1 ;;
   esac || { echo "speed-rounds: $which on $seq failed, see $dir.log" >&2; exit 1; }

@@ -8,6 +8,7 @@ use bevt_node::tool::eval::{
     eval, parse_compare, plot_series, EvalOptions, SequenceProgress, EXIT_SEQUENCE_FAILED,
 };
 use bevt_node::tool::plots::plot_curves;
+use bevt_node::tool::runner::Decode;
 use bevt_tests::temp_dir;
 use std::path::Path;
 
@@ -71,6 +72,57 @@ fn options(root: &Path, out: &Path, sequences: &[&str]) -> EvalOptions {
         name: "BEVT-rs".into(),
         progress: false,
         perturb: None,
+        decode: Decode::Ahead,
+    }
+}
+
+/// `--decode inline` decodes on the tracking thread between the timed calls: the same
+/// boxes as decoding ahead, with and without a perturbation, the failures reported alike,
+/// and `summary.json` says where the frames were decoded (the fps depend on it).
+#[test]
+fn decoding_inline_gives_the_same_boxes_and_says_so() {
+    use bevt_core::eval::perturb::Perturbation;
+    let root = temp_dir("ds_decode");
+    write_dataset(&root);
+    for perturb in [None, Some("shake=6,seed=2")] {
+        let mut results = Vec::new();
+        for decode in [Decode::Ahead, Decode::Inline] {
+            let out = temp_dir(&format!(
+                "out_decode_{}_{}",
+                decode.name(),
+                perturb.is_some()
+            ));
+            let mut o = options(&root, &out, &[]);
+            o.decode = decode;
+            o.perturb = perturb.map(|p| Perturbation::parse(p).unwrap());
+            let r = eval(&o).unwrap();
+            assert_eq!(r.exit_code(), EXIT_SEQUENCE_FAILED);
+            assert_eq!(r.summary.decode, decode.name());
+            let json = std::fs::read_to_string(out.join("summary.json")).unwrap();
+            assert!(
+                json.contains(&format!("\"decode\": \"{}\"", decode.name())),
+                "{json}"
+            );
+            let errors: Vec<_> = r
+                .summary
+                .sequences
+                .iter()
+                .map(|s| s.error.clone())
+                .collect();
+            let good = std::fs::read_to_string(out.join("good.txt")).unwrap();
+            results.push((good, errors));
+        }
+        assert_eq!(results[0], results[1], "perturb {perturb:?}");
+        // The corrupt frame is reported by name either way.
+        assert!(
+            results[1]
+                .1
+                .iter()
+                .flatten()
+                .any(|e| e.contains("000005.png")),
+            "{:?}",
+            results[1].1
+        );
     }
 }
 
@@ -457,10 +509,17 @@ fn the_speed_scripts_refuse_bad_arguments_before_any_work() {
             vec!["2", missing.to_str().unwrap()],
             "sequences.json missing",
         ),
+        (
+            vec!["2", "DECODE=thread"],
+            "DECODE must be 'inline' or 'ahead'",
+        ),
     ] {
+        // `NAME=VALUE` arguments go to the environment.
+        let (env, args): (Vec<&str>, Vec<&str>) = args.into_iter().partition(|a| a.contains('='));
         let out = std::process::Command::new("bash")
             .arg(root.join("scripts/speed-rounds.sh"))
             .args(&args)
+            .envs(env.iter().filter_map(|e| e.split_once('=')))
             // Were an argument let through, the run would stop at once on this binary
             // (another message) instead of building and measuring for an hour.
             .env("BEVT", tmp.join("no_such_bevt"))

@@ -19,7 +19,7 @@ use bevt_node::tool::replay::{
     decode_only, parse_box as parse_replay_box, parse_reinit_file, parse_time_ns, InitAt,
     ReplayOptions, ReplaySummary,
 };
-use bevt_node::tool::runner::{decode_ahead, track_feed};
+use bevt_node::tool::runner::{decode_ahead, track_feed, Decode};
 use bevt_node::tool::select::{render, select, Criterion, SelectOptions};
 use clap::{Args, Parser, Subcommand};
 use std::path::{Path, PathBuf};
@@ -119,6 +119,12 @@ enum Cmd {
         /// period=FRAMES (default 40), seed=N. E.g. `--perturb shake=8,seed=1`.
         #[arg(long, value_name = "SPEC")]
         perturb: Option<String>,
+        /// Where frames are decoded: `ahead` on a thread beside the tracker (the shortest
+        /// run), or `inline` on the tracking thread between its timed calls, so that nothing
+        /// else runs while it is timed, as the peers' harnesses decode (speed comparisons:
+        /// `scripts/speed-rounds.sh`). Only init and update are timed either way.
+        #[arg(long, value_name = "WHERE", default_value = "ahead")]
+        decode: Decode,
     },
     /// Leave-one-sequence-out selection over finished `bevt eval --out` folders.
     ///
@@ -308,6 +314,7 @@ fn eval(
     compare: &[String],
     name: &str,
     perturb: Option<&str>,
+    decode: Decode,
 ) -> Result<ExitCode> {
     let perturb = perturb
         .map(|p| Perturbation::parse(p).map_err(|e| anyhow::anyhow!("--perturb {p:?}: {e}")))
@@ -325,6 +332,7 @@ fn eval(
         name: name.to_string(),
         progress: true,
         perturb,
+        decode,
     };
     Ok(ExitCode::from(
         bevt_node::tool::eval::eval(&opts)?.exit_code(),
@@ -405,6 +413,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             compare,
             name,
             perturb,
+            decode,
         } => eval(
             cfg,
             dataset,
@@ -414,6 +423,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             compare,
             name,
             perturb.as_deref(),
+            *decode,
         ),
         Cmd::Select {
             variants,

@@ -9,7 +9,7 @@ use crate::tool::plots::{plot_curves, Curve};
 use crate::tool::report::{
     build_summary, console_table, summarize_run, write_result_file, write_summary, Summary,
 };
-use crate::tool::runner::run_perturbed;
+use crate::tool::runner::{run_perturbed, Decode};
 use anyhow::{bail, Context, Result};
 use bevt_core::eval::perturb::Perturbation;
 use bevt_core::{BevtTracker, TrackerSpec};
@@ -42,6 +42,9 @@ pub struct EvalOptions {
     pub progress: bool,
     /// Transform every frame and its ground truth (`--perturb`; `None`: the footage as is).
     pub perturb: Option<Perturbation>,
+    /// Where frames are decoded (`--decode`): beside the tracker, or between its timed
+    /// calls on its own thread.
+    pub decode: Decode,
 }
 
 /// Parses one `--compare NAME=DIR`.
@@ -163,6 +166,7 @@ pub fn eval(opts: &EvalOptions) -> Result<EvalOutcome> {
                 &entry.name,
                 loaded,
                 opts.perturb.as_ref(),
+                opts.decode,
                 &mut tracker,
                 |_, o| {
                     bar.inc(1);
@@ -205,6 +209,7 @@ pub fn eval(opts: &EvalOptions) -> Result<EvalOutcome> {
             config_json.clone(),
         );
         partial.perturb.clone_from(&perturb);
+        partial.decode = opts.decode.name();
         write_summary(out, &partial)
             .with_context(|| format!("cannot write {}/summary.json", out.display()))?;
     }
@@ -217,6 +222,7 @@ pub fn eval(opts: &EvalOptions) -> Result<EvalOutcome> {
         config_json,
     );
     summary.perturb = perturb;
+    summary.decode = opts.decode.name();
     write_summary(out, &summary)
         .with_context(|| format!("cannot write {}/summary.json", out.display()))?;
     println!("\n{}", console_table(&summary));

@@ -154,6 +154,9 @@ pub struct Summary {
     /// The `--perturb` applied to every frame and its truth (absent: none).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub perturb: Option<String>,
+    /// Where the frames were decoded (`ahead`: on a thread beside the tracker; `inline`:
+    /// between its timed calls), which the fps depend on.
+    pub decode: &'static str,
 }
 
 /// Minimum, 5th, 50th and 95th percentile (nearest rank) of `v`; NaN when empty.
@@ -338,6 +341,7 @@ pub fn build_summary(
         attributes,
         config,
         perturb: None,
+        decode: "ahead",
     }
 }
 

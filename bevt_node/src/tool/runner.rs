@@ -1,5 +1,6 @@
 //! Runs a tracker over a sequence of image files: frames are decoded on a named prefetch
-//! thread while the tracker works, and only `init`/`update` are timed.
+//! thread while the tracker works ([`Decode::Ahead`]) or on the tracking thread between
+//! frames ([`Decode::Inline`]), and only `init`/`update` are timed.
 //!
 //! Failures (an unreadable frame, a tracker error) end the run early with the reason;
 //! every box computed before that is kept.
@@ -52,12 +53,81 @@ impl TrackRun {
     }
 }
 
+/// Where a run's frames are decoded (`bevt eval --decode`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Decode {
+    /// On a prefetch thread while the tracker works: the shortest run.
+    #[default]
+    Ahead,
+    /// On the tracking thread, between frames and outside the timed calls: nothing runs
+    /// beside the tracker while it is timed (the peers' harnesses decode so, e.g.
+    /// `scripts/nanotrack_peer.py`); for speed comparisons.
+    Inline,
+}
+
+impl Decode {
+    /// The name `--decode` takes and `summary.json` records.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Ahead => "ahead",
+            Self::Inline => "inline",
+        }
+    }
+}
+
+impl std::str::FromStr for Decode {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "ahead" => Ok(Self::Ahead),
+            "inline" => Ok(Self::Inline),
+            _ => Err(format!("{s:?}: expected 'ahead' or 'inline'")),
+        }
+    }
+}
+
+/// A run's decoded frames, in order.
+pub type Frames = Box<dyn Iterator<Item = Result<RgbFrame, String>> + Send>;
+
 /// Decodes `paths` on a background thread, in order.
 ///
 /// # Errors
 /// Each item is `Err(reason)` for a frame that cannot be read or decoded.
 pub fn decode_ahead(paths: Vec<PathBuf>) -> impl Iterator<Item = Result<RgbFrame, String>> {
     decode_ahead_with(paths, |_, img| Ok(img))
+}
+
+/// Frame `i` of `p` decoded to RGB and passed through `map(i, frame)`.
+fn decode_one(
+    i: usize,
+    p: &std::path::Path,
+    map: &impl Fn(usize, RgbFrame) -> Result<RgbFrame, String>,
+) -> Result<RgbFrame, String> {
+    image::open(p)
+        .map(|i| i.to_rgb8())
+        .map_err(|e| format!("{}: {e}", p.display()))
+        .and_then(|img| map(i, img).map_err(|e| format!("{}: {e}", p.display())))
+}
+
+/// `paths` decoded as `decode` says, each frame `i` passed through `map(i, frame)`.
+///
+/// # Errors
+/// Each item is `Err(reason)` for a frame that cannot be read, decoded or mapped.
+pub fn decode_frames(
+    paths: Vec<PathBuf>,
+    decode: Decode,
+    map: impl Fn(usize, RgbFrame) -> Result<RgbFrame, String> + Send + 'static,
+) -> Frames {
+    match decode {
+        Decode::Ahead => Box::new(decode_ahead_with(paths, map)),
+        Decode::Inline => Box::new(
+            paths
+                .into_iter()
+                .enumerate()
+                .map(move |(i, p)| decode_one(i, &p, &map)),
+        ),
+    }
 }
 
 /// [`decode_ahead`], passing frame `i` through `map(i, frame)` on the decoding thread.
@@ -73,11 +143,7 @@ pub fn decode_ahead_with(
         .name("bevt-decode".into())
         .spawn(move || {
             for (i, p) in paths.into_iter().enumerate() {
-                let r = image::open(&p)
-                    .map(|i| i.to_rgb8())
-                    .map_err(|e| format!("{}: {e}", p.display()))
-                    .and_then(|img| map(i, img).map_err(|e| format!("{}: {e}", p.display())));
-                if tx.send(r).is_err() {
+                if tx.send(decode_one(i, &p, &map)).is_err() {
                     break;
                 }
             }
@@ -198,7 +264,7 @@ pub fn run_loaded(
     tracker: &mut dyn Tracker,
     on_frame: impl FnMut(usize, Option<&TrackOutput>),
 ) -> SequenceRun {
-    run_perturbed(name, loaded, None, tracker, on_frame)
+    run_perturbed(name, loaded, None, Decode::Ahead, tracker, on_frame)
 }
 
 /// A sequence under `--perturb`: the moved truth and the transformed frames.
@@ -213,7 +279,8 @@ struct Perturbed<I> {
 fn perturb_sequence(
     seq: Sequence,
     sp: SequencePerturbation,
-) -> Result<Perturbed<impl Iterator<Item = Result<RgbFrame, String>>>, String> {
+    decode: Decode,
+) -> Result<Perturbed<Frames>, String> {
     let first = seq
         .frames
         .first()
@@ -234,7 +301,7 @@ fn perturb_sequence(
     // The look-alike: the first annotated frame's target, pasted beside the target.
     let boxes = truth.clone();
     let template = std::sync::Mutex::new(None);
-    let frames = decode_ahead_with(seq.frames, move |t, img| {
+    let frames = decode_frames(seq.frames, decode, move |t, img| {
         let (iw, ih) = (img.width() as usize, img.height() as usize);
         if (iw, ih) != (w, h) {
             return Err(format!("frame is {iw}x{ih}, the sequence's first {w}x{h}"));
@@ -260,11 +327,13 @@ fn perturb_sequence(
 }
 
 /// [`run_loaded`] with every frame and its ground truth transformed by `perturb` (the
-/// returned truth is the transformed one, so scores compare like with like).
+/// returned truth is the transformed one, so scores compare like with like), the frames
+/// decoded as `decode` says.
 pub fn run_perturbed(
     name: &str,
     loaded: Result<Sequence, DatasetError>,
     perturb: Option<&Perturbation>,
+    decode: Decode,
     tracker: &mut dyn Tracker,
     on_frame: impl FnMut(usize, Option<&TrackOutput>),
 ) -> SequenceRun {
@@ -307,7 +376,7 @@ pub fn run_perturbed(
     let Some(p) = perturb else {
         let run = track_feed(
             tracker,
-            decode_ahead(seq.frames),
+            decode_frames(seq.frames, decode, |_, img| Ok(img)),
             init_index,
             init,
             on_frame,
@@ -321,7 +390,7 @@ pub fn run_perturbed(
     let name = seq.name.clone();
     let original = seq.truth.clone();
     let sp = p.for_sequence(&name);
-    let Perturbed { truth, frames } = match perturb_sequence(seq, sp) {
+    let Perturbed { truth, frames } = match perturb_sequence(seq, sp, decode) {
         Ok(x) => x,
         Err(e) => return failed(name, original, e),
     };
@@ -336,4 +405,73 @@ pub fn run_perturbed(
     };
     let run = track_feed(tracker, frames, init_index, init, on_frame);
     SequenceRun { name, truth, run }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Three 4×2 PNG frames in a fresh folder, the third not an image.
+    fn frames(tag: &str) -> Vec<PathBuf> {
+        let dir = std::env::temp_dir().join(format!("bevt_runner_{tag}_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        (0..3)
+            .map(|i| {
+                let p = dir.join(format!("{i}.png"));
+                if i == 2 {
+                    std::fs::write(&p, b"not a png").unwrap();
+                } else {
+                    RgbFrame::from_pixel(4, 2, image::Rgb([i as u8 * 50, 7, 9]))
+                        .save(&p)
+                        .unwrap();
+                }
+                p
+            })
+            .collect()
+    }
+
+    /// `Inline` decodes on the thread that takes the frames, `Ahead` on another; both give
+    /// the same frames, in order, through `map`, and the same error for the bad one.
+    #[test]
+    fn inline_decodes_on_the_callers_thread_and_ahead_beside_it() {
+        let me = std::thread::current().id();
+        let paths = frames("decode");
+        let mut got = Vec::new();
+        for decode in [Decode::Ahead, Decode::Inline] {
+            let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+            let s = seen.clone();
+            let items: Vec<_> = decode_frames(paths.clone(), decode, move |i, img| {
+                s.lock().unwrap().push((i, std::thread::current().id()));
+                Ok(img)
+            })
+            .map(|r| r.map(|f| f.get_pixel(0, 0).0))
+            .collect();
+            let seen = seen.lock().unwrap().clone();
+            assert_eq!(seen.iter().map(|s| s.0).collect::<Vec<_>>(), [0, 1]);
+            assert_eq!(
+                seen.iter().all(|s| s.1 == me),
+                decode == Decode::Inline,
+                "{decode:?}"
+            );
+            assert_eq!(items.len(), 3);
+            assert!(
+                items[2].as_ref().is_err_and(|e| e.contains("2.png")),
+                "{items:?}"
+            );
+            got.push(items);
+        }
+        assert_eq!(got[0], got[1]);
+        assert_eq!(got[1][1], Ok([50, 7, 9]));
+    }
+
+    #[test]
+    fn decode_names_round_trip_and_others_are_refused() {
+        for d in [Decode::Ahead, Decode::Inline] {
+            assert_eq!(d.name().parse::<Decode>(), Ok(d));
+        }
+        assert!("prefetch"
+            .parse::<Decode>()
+            .is_err_and(|e| e.contains("'inline'")));
+        assert_eq!(Decode::default(), Decode::Ahead);
+    }
 }
