@@ -360,7 +360,12 @@ impl BoxRefiner {
         );
         let net = match c.box_refine.mode {
             BoxRefineMode::None => return Ok(None),
-            BoxRefineMode::Nanotrack => NanoVerifier::new(bb, hd)?,
+            BoxRefineMode::Nanotrack => {
+                let mut v = NanoVerifier::new(bb, hd)?;
+                // Its crop's plans now (cached per process), not at the first box.
+                v.plan_cells(c.box_refine.search_cells)?;
+                v
+            }
             #[cfg(feature = "cnn")]
             BoxRefineMode::NanotrackOrt => {
                 let runtime = c.features.cnn.as_ref().map_or("", |x| x.runtime.as_str());

@@ -562,7 +562,10 @@ impl BevtTracker {
     /// The first model that cannot be loaded, naming its configuration key.
     pub fn check_models(spec: &TrackerSpec) -> Result<(), TrackError> {
         Self::build_extractor(spec)?;
-        Self::build_verifier(spec)?;
+        if let Some(mut v) = Self::build_verifier(spec)? {
+            // The lost frames' tiles, when they are not NanoTrack's own crop.
+            v.prepare_cells(spec.config.redetection.verifier_tile_cells)?;
+        }
         BoxRefiner::new(spec)?;
         Ok(())
     }

@@ -76,6 +76,27 @@ fn options(root: &Path, out: &Path, sequences: &[&str]) -> EvalOptions {
     }
 }
 
+/// The models are loaded and checked before any sequence runs (not inside the first
+/// sequence's timed `init`): a bad model path stops the run at once with its key, no
+/// sequence run and no results written.
+#[test]
+fn a_bad_model_stops_the_run_before_any_sequence() {
+    let root = temp_dir("ds_badmodel");
+    write_dataset(&root);
+    let out = temp_dir("out_badmodel");
+    let _ = std::fs::remove_dir_all(&out);
+    let mut o = options(&root, &out, &["good"]);
+    let mut cfg = TrackerConfig::default();
+    cfg.redetection.verifier_backbone = root.join("no_such_backbone.onnx").display().to_string();
+    o.tracker = cfg.validate().unwrap();
+    let e = format!("{:#}", eval(&o).unwrap_err());
+    assert!(
+        e.contains("redetection.verifier_backbone") && e.contains("no_such_backbone.onnx"),
+        "{e}"
+    );
+    assert!(!out.join("good.txt").exists() && !out.join("summary.json").exists());
+}
+
 /// `--decode inline` decodes on the tracking thread between the timed calls: the same
 /// boxes as decoding ahead, with and without a perturbation, the failures reported alike,
 /// and `summary.json` says where the frames were decoded (the fps depend on it).

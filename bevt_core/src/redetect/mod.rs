@@ -145,6 +145,17 @@ pub trait Verifier: Send + std::fmt::Debug {
         let _ = cells;
         self.search_above(frame, center, side, bar)
     }
+
+    /// Gets ready for [`Self::search_above_cells`] crops of `cells` grid points now
+    /// (planning a network, say), so that the first lost frame does not: called by the
+    /// tracker's start-up check. Nothing to do by default.
+    ///
+    /// # Errors
+    /// [`TrackError::Feature`] when the verifier cannot take the size.
+    fn prepare_cells(&mut self, cells: usize) -> Result<(), TrackError> {
+        let _ = cells;
+        Ok(())
+    }
 }
 
 /// Upper bound on the tiles of one plan (per scale); the stride grows to respect it.

@@ -1062,6 +1062,43 @@ impl NanoVerifier {
     /// `16·cells − 1` pixels (`cells` even, 4 to [`MAX_SIZED_CELLS`], not 16), on the sized
     /// plans (planned on first use, once per process and size); `None` without a template
     /// or for a degenerate side.
+    /// Plans the networks for search maps of `cells × cells` now (once per process and
+    /// size: later verifiers share them), so that the first pass of that size does not:
+    /// what [`crate::BevtTracker::check_models`] calls at start-up. Nothing to do for 16
+    /// cells (planned with the verifier) or on ONNX Runtime (which refuses other sizes at
+    /// the pass).
+    ///
+    /// # Errors
+    /// `cells` odd or out of range (as the pass would say), or a planning error.
+    pub fn plan_cells(&mut self, cells: usize) -> Result<(), TrackError> {
+        if cells == SEARCH_CELLS {
+            return Ok(());
+        }
+        Self::check_cells(self.backend.paths().0, cells)?;
+        match &self.backend {
+            Backend::Native { plans, .. } => {
+                plans.sized(cells)?;
+            }
+            #[cfg(feature = "cnn")]
+            Backend::Ort(_) => {}
+        }
+        Ok(())
+    }
+
+    /// `cells` even, 4 to [`MAX_SIZED_CELLS`], else the error naming the backbone's path.
+    fn check_cells(path: &str, cells: usize) -> Result<(), NanoError> {
+        if !(4..=MAX_SIZED_CELLS).contains(&cells) || !cells.is_multiple_of(2) {
+            return Err(NanoError::Run {
+                key: BACKBONE_KEY,
+                path: path.to_string(),
+                reason: format!(
+                    "search maps of {cells} cells; an even number from 4 to {MAX_SIZED_CELLS} is supported"
+                ),
+            });
+        }
+        Ok(())
+    }
+
     fn sized_features(
         &mut self,
         frame: &Frame<'_>,
@@ -1070,17 +1107,7 @@ impl NanoVerifier {
         cells: usize,
     ) -> Result<Option<Vec<f32>>, TrackError> {
         let path = self.backend.paths().0.to_string();
-        let run_err = |reason: String| NanoError::Run {
-            key: BACKBONE_KEY,
-            path: path.clone(),
-            reason,
-        };
-        if !(4..=MAX_SIZED_CELLS).contains(&cells) || !cells.is_multiple_of(2) {
-            return Err(run_err(format!(
-                "search maps of {cells} cells; an even number from 4 to {MAX_SIZED_CELLS} is supported"
-            ))
-            .into());
-        }
+        Self::check_cells(&path, cells)?;
         if self.template.is_empty() || !(side.is_finite() && side > 0.0) {
             return Ok(None);
         }
@@ -1088,9 +1115,13 @@ impl NanoVerifier {
             Backend::Native { plans, sized, .. } => (plans, sized),
             #[cfg(feature = "cnn")]
             Backend::Ort(_) => {
-                return Err(run_err(format!(
-                "search maps of {cells} cells need the pure-Rust networks (ONNX Runtime plans 16)"
-            ))
+                return Err(NanoError::Run {
+                    key: BACKBONE_KEY,
+                    path,
+                    reason: format!(
+                        "search maps of {cells} cells need the pure-Rust networks (ONNX Runtime plans 16)"
+                    ),
+                }
                 .into())
             }
         };
@@ -1264,6 +1295,10 @@ impl Verifier for NanoVerifier {
     ) -> Result<Option<Scored>, TrackError> {
         self.search_above_sized(frame, center, side, bar, cells)
     }
+
+    fn prepare_cells(&mut self, cells: usize) -> Result<(), TrackError> {
+        self.plan_cells(cells)
+    }
 }
 
 #[cfg(test)]
@@ -1374,6 +1409,30 @@ mod tests {
     /// A smaller search crop (12 cells, 191 pixels) still finds a textured target at its
     /// centre and regresses a box of about its size, like the 255-pixel one; odd or
     /// out-of-range sides are errors, a degenerate crop side gives nothing.
+    /// Planning a size ahead (what the start-up check does) refuses what the pass refuses,
+    /// with the same words, and leaves the size planned for every later verifier.
+    #[test]
+    fn sizes_planned_ahead_are_checked_and_shared() {
+        let mut v = NanoVerifier::new("", "").unwrap();
+        for bad in [3, 2, 34] {
+            let e = v.plan_cells(bad).unwrap_err().to_string();
+            assert!(e.contains(&format!("search maps of {bad} cells")), "{e}");
+        }
+        v.plan_cells(16).unwrap();
+        v.plan_cells(10).unwrap();
+        let Backend::Native { plans, .. } = &v.backend else {
+            panic!("the native backend")
+        };
+        let planned = plans.sized.lock().unwrap().iter().any(|(c, _)| *c == 10);
+        assert!(planned, "10 cells not planned");
+        // Another verifier of the same models shares them.
+        let w = NanoVerifier::new("", "").unwrap();
+        let Backend::Native { plans: p2, .. } = &w.backend else {
+            panic!("the native backend")
+        };
+        assert!(Arc::ptr_eq(plans, p2));
+    }
+
     #[test]
     fn smaller_search_maps_find_the_target_at_the_crop_centre() {
         let (px, size, c, (w, h)) = synth(0);

@@ -119,8 +119,9 @@ fn sequence_bar(name: &str, frames: u64, visible: bool) -> ProgressBar {
 /// when a later one fails or the run is interrupted), then the console table and the plots.
 ///
 /// # Errors
-/// Unreadable dataset, unknown sequence name, output folder or plots that cannot be written,
-/// or worker threads that cannot start. A sequence that fails (unreadable frame, bad
+/// Unreadable dataset, unknown sequence name, a model that cannot be loaded (checked before
+/// any sequence runs), output folder or plots that cannot be written, or worker threads that
+/// cannot start. A sequence that fails (unreadable frame, bad
 /// annotation) is not an error: it is reported in the summary and in
 /// [`EvalOutcome::exit_code`].
 pub fn eval(opts: &EvalOptions) -> Result<EvalOutcome> {
@@ -133,6 +134,10 @@ pub fn eval(opts: &EvalOptions) -> Result<EvalOutcome> {
             bail!("--compare {n}: {} is not a folder", d.display());
         }
     }
+    // The models load, plan and pass their check here, once, as the node does at start-up:
+    // not inside the first sequence's timed `init` (the peers' harnesses load theirs before
+    // timing too), and a bad model path stops the run before any sequence, naming its key.
+    BevtTracker::check_models(&opts.tracker).context("cannot load the tracker's models")?;
     let out = opts.out.as_path();
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let threads = opts.tracker.config.threads;
