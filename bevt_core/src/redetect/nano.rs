@@ -1058,10 +1058,6 @@ impl NanoVerifier {
         Ok(Some((margins, loc)))
     }
 
-    /// The backbone's features of the square of side `side` at `center` resampled to
-    /// `16·cells − 1` pixels (`cells` even, 4 to [`MAX_SIZED_CELLS`], not 16), on the sized
-    /// plans (planned on first use, once per process and size); `None` without a template
-    /// or for a degenerate side.
     /// Plans the networks for search maps of `cells × cells` now (once per process and
     /// size: later verifiers share them), so that the first pass of that size does not:
     /// what [`crate::BevtTracker::check_models`] calls at start-up. Nothing to do for 16
@@ -1099,6 +1095,10 @@ impl NanoVerifier {
         Ok(())
     }
 
+    /// The backbone's features of the square of side `side` at `center` resampled to
+    /// `16·cells − 1` pixels (`cells` even, 4 to [`MAX_SIZED_CELLS`], not 16), on the sized
+    /// plans (planned on first use, once per process and size); `None` without a template
+    /// or for a degenerate side.
     fn sized_features(
         &mut self,
         frame: &Frame<'_>,
@@ -1406,9 +1406,6 @@ mod tests {
         (f.rgb, (seq.width, seq.height), t.0, t.1)
     }
 
-    /// A smaller search crop (12 cells, 191 pixels) still finds a textured target at its
-    /// centre and regresses a box of about its size, like the 255-pixel one; odd or
-    /// out-of-range sides are errors, a degenerate crop side gives nothing.
     /// Planning a size ahead (what the start-up check does) refuses what the pass refuses,
     /// with the same words, and leaves the size planned for every later verifier.
     #[test]
@@ -1435,6 +1432,9 @@ mod tests {
         assert!(Arc::ptr_eq(plans, plans_of(&w)));
     }
 
+    /// A smaller search crop (12 cells, 191 pixels) still finds a textured target at its
+    /// centre and regresses a box of about its size, like the 255-pixel one; odd or
+    /// out-of-range sides are errors, a degenerate crop side gives nothing.
     #[test]
     fn smaller_search_maps_find_the_target_at_the_crop_centre() {
         let (px, size, c, (w, h)) = synth(0);
