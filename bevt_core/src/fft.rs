@@ -142,6 +142,25 @@ impl Fft2 {
     /// Forward transform of a map that is zero outside rows `r0..r1` (only those rows of
     /// `input` are read): the pruned transform used for cropped filters.
     pub fn forward_rows(&mut self, input: &[f32], r0: usize, r1: usize, spec: &mut [Complex32]) {
+        self.forward_rows_windowed(input, None, r0, r1, spec);
+    }
+
+    /// [`Self::forward`] of `input` multiplied by `window` (a map of the same grid), the
+    /// product formed as the rows are packed for their transforms: what multiplying the map
+    /// in place and then transforming it gives, the same bits, without writing the windowed
+    /// map and reading it back.
+    pub fn forward_windowed(&mut self, input: &[f32], window: &[f32], spec: &mut [Complex32]) {
+        self.forward_rows_windowed(input, Some(window), 0, self.grid.h, spec);
+    }
+
+    fn forward_rows_windowed(
+        &mut self,
+        input: &[f32],
+        window: Option<&[f32]>,
+        r0: usize,
+        r1: usize,
+        spec: &mut [Complex32],
+    ) {
         let (h, w, wc) = (self.grid.h, self.grid.w, self.wc);
         debug_assert!(input.len() >= h * w && spec.len() >= wc * h);
         let (r0, r1) = (r0.min(h), r1.min(h).max(r0.min(h)));
@@ -151,15 +170,32 @@ impl Fft2 {
             let (bin, bout) = (&mut self.rows_in[..n], &mut self.rows_out[..n]);
             match &self.rows {
                 RowPlan::Even { fwd, tw_fwd, .. } => {
-                    for (b, x) in bin.iter_mut().zip(src.chunks_exact(2)) {
-                        *b = Complex32::new(x[0], x[1]);
+                    // (A window not of the grid's size is never built; one would go unused.)
+                    if let Some(win) = window.and_then(|m| m.get(r0 * w..r1 * w)) {
+                        for ((b, x), m) in bin
+                            .iter_mut()
+                            .zip(src.chunks_exact(2))
+                            .zip(win.chunks_exact(2))
+                        {
+                            *b = Complex32::new(x[0] * m[0], x[1] * m[1]);
+                        }
+                    } else {
+                        for (b, x) in bin.iter_mut().zip(src.chunks_exact(2)) {
+                            *b = Complex32::new(x[0], x[1]);
+                        }
                     }
                     rows_outofplace(&**fwd, self.batch, bin, bout, &mut self.scratch_r);
                     untangle_forward(bout, self.row_len, tw_fwd, &mut spec[..wc * h], h, r0);
                 }
                 RowPlan::Odd { fwd, .. } => {
-                    for (b, &x) in bin.iter_mut().zip(src) {
-                        *b = Complex32::new(x, 0.0);
+                    if let Some(win) = window.and_then(|m| m.get(r0 * w..r1 * w)) {
+                        for ((b, &x), &m) in bin.iter_mut().zip(src).zip(win) {
+                            *b = Complex32::new(x * m, 0.0);
+                        }
+                    } else {
+                        for (b, &x) in bin.iter_mut().zip(src) {
+                            *b = Complex32::new(x, 0.0);
+                        }
                     }
                     rows_inplace(&**fwd, self.batch, bin, &mut self.scratch_r);
                     for (kx, col) in spec[..wc * h].chunks_exact_mut(h).enumerate() {
@@ -413,6 +449,33 @@ pub fn shift_spectrum(spec: &mut [Complex32], grid: GridSize, dy: f32, dx: f32) 
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn windowed_transform_is_the_transform_of_the_windowed_map_bit_for_bit() {
+        // Even widths (rows packed in pairs) and odd ones (one value a bin).
+        for (h, w) in [(6, 8), (5, 7), (12, 10), (9, 15)] {
+            let grid = GridSize { h, w };
+            let x: Vec<f32> = (0..h * w)
+                .map(|i| ((i * 37 % 29) as f32 - 14.0) * 0.37)
+                .collect();
+            let win: Vec<f32> = (0..h * w)
+                .map(|i| 0.1 + (i * 13 % 17) as f32 / 19.0)
+                .collect();
+            let windowed: Vec<f32> = x.iter().zip(&win).map(|(a, b)| a * b).collect();
+            let mut fft = Fft2::new(grid);
+            let n = fft.spectrum_len();
+            let (mut a, mut b) = (vec![Complex32::default(); n], vec![Complex32::default(); n]);
+            fft.forward_windowed(&x, &win, &mut a);
+            fft.forward(&windowed, &mut b);
+            let bits = |v: &[Complex32]| -> Vec<(u32, u32)> {
+                v.iter().map(|c| (c.re.to_bits(), c.im.to_bits())).collect()
+            };
+            assert_eq!(bits(&a), bits(&b), "{h} x {w}");
+            // And not the unwindowed map's.
+            fft.forward(&x, &mut b);
+            assert_ne!(bits(&a), bits(&b), "{h} x {w}");
+        }
+    }
 
     fn naive_dft(x: &[f32], h: usize, w: usize, ky: usize, kx: usize) -> Complex32 {
         let mut acc = (0.0f64, 0.0f64);

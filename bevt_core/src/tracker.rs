@@ -216,13 +216,17 @@ impl ScaleWorker {
         Ok(())
     }
 
-    /// Windows `feat` and transforms it into `xf`.
+    /// Transforms `feat` times `window` into `xf` (the window applied as each channel's rows
+    /// are packed for the transform: `feat` itself stays unwindowed, and nothing reads it
+    /// before the next extraction overwrites it).
     fn transform(&mut self, window: &[f32]) {
-        self.feat.apply_window(window);
         let bins = self.fft.spectrum_len();
         for d in 0..self.feat.channels {
-            self.fft
-                .forward(self.feat.channel(d), &mut self.xf[d * bins..(d + 1) * bins]);
+            self.fft.forward_windowed(
+                self.feat.channel(d),
+                window,
+                &mut self.xf[d * bins..(d + 1) * bins],
+            );
         }
     }
 
