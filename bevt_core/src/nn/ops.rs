@@ -623,9 +623,45 @@ fn rows_product_narrow(
     // FMA pipes' 4), and 8 sums only just cover the multiply-add's latency. The last 8 to 15
     // columns take 6 × 8; the baseline clone (SSE2) and aarch64 keep 8 × 8 on 8-row blocks.
     // Every output's sum runs over `p` in order.
+    // The activation as each block is stored (one function a loop, inlined, so the stores
+    // stay vectorised): `f(sum + bias)`, what activating the finished rows afterwards gave,
+    // without reading them back.
+    let shape = (m, k, n);
+    // (Read here: the macro answers for the clone it is expanded in.)
+    let avx2 = multiversion::target::target_cfg_f!(target_feature = "avx2");
+    match act {
+        None => narrow_blocks(shape, wp, (x, xs), bias, (y, ys), (&madd, avx2), &|v| v),
+        Some(Unary::Relu) => {
+            narrow_blocks(shape, wp, (x, xs), bias, (y, ys), (&madd, avx2), &|v| {
+                Unary::Relu.eval(v)
+            })
+        }
+        Some(Unary::HardSwish) => {
+            narrow_blocks(shape, wp, (x, xs), bias, (y, ys), (&madd, avx2), &|v| {
+                Unary::HardSwish.eval(v)
+            })
+        }
+        Some(f) => narrow_blocks(shape, wp, (x, xs), bias, (y, ys), (&madd, avx2), &|v| {
+            f.eval(v)
+        }),
+    }
+}
+
+/// [`rows_product_narrow`]'s blocks, each output stored as `g(sum + bias)`. Inlined into each
+/// clone of the caller, once per activation.
+#[inline(always)]
+fn narrow_blocks(
+    (m, k, n): (usize, usize, usize),
+    wp: &[f32],
+    (x, xs): (&[f32], usize),
+    bias: &[f32],
+    (y, ys): (&mut [f32], usize),
+    (madd, avx2): (&impl Fn(f32, f32, f32) -> f32, bool),
+    g: &impl Fn(f32) -> f32,
+) {
     let bm = block_rows();
     let six = bm == AVX2_BLOCK_M;
-    let wide = six && multiversion::target::target_cfg_f!(target_feature = "avx2");
+    let wide = six && avx2;
     let full_wide = if wide { n - n % WIDE_N } else { 0 };
     let full = n - (n - full_wide) % BLOCK_N;
     for (b, wb) in wp.chunks_exact(k * bm).enumerate() {
@@ -637,20 +673,20 @@ fn rows_product_narrow(
             // A last block of at most 4 rows (16 outputs of the first convolution: 6, 6, 4)
             // sums only those: the same sums, without the two rows the packing pads.
             if rows <= 4 {
-                let acc = block_sums::<4, WIDE_N>(&madd, block, x, xs, j);
-                store_block(&acc, rows, bias, y, at(j));
+                let acc = block_sums::<4, WIDE_N>(madd, block, x, xs, j);
+                store_block(&acc, rows, bias, y, at(j), g);
                 continue;
             }
-            let acc = block_sums::<AVX2_BLOCK_M, WIDE_N>(&madd, block, x, xs, j);
-            store_block(&acc, rows, bias, y, at(j));
+            let acc = block_sums::<AVX2_BLOCK_M, WIDE_N>(madd, block, x, xs, j);
+            store_block(&acc, rows, bias, y, at(j), g);
         }
         for j in (full_wide..full).step_by(BLOCK_N) {
             if six {
-                let acc = block_sums::<AVX2_BLOCK_M, BLOCK_N>(&madd, block, x, xs, j);
-                store_block(&acc, rows, bias, y, at(j));
+                let acc = block_sums::<AVX2_BLOCK_M, BLOCK_N>(madd, block, x, xs, j);
+                store_block(&acc, rows, bias, y, at(j), g);
             } else {
-                let acc = block_sums::<BLOCK_M, BLOCK_N>(&madd, block, x, xs, j);
-                store_block(&acc, rows, bias, y, at(j));
+                let acc = block_sums::<BLOCK_M, BLOCK_N>(madd, block, x, xs, j);
+                store_block(&acc, rows, bias, y, at(j), g);
             }
         }
         // The last columns (fewer than 8) one at a time, the block's rows side by side: each
@@ -668,14 +704,7 @@ fn rows_product_narrow(
                 }
             }
             for (i, (a, &b)) in acc.iter().zip(bias).enumerate() {
-                y[(i0 + i) * ys + j] = a + b;
-            }
-        }
-        // The activation over each finished row while it is in cache (a loop the compiler
-        // vectorises, unlike one per block).
-        if let Some(f) = act {
-            for i in i0..i0 + rows {
-                apply_in_place(f, &mut y[i * ys..i * ys + n]);
+                y[(i0 + i) * ys + j] = g(a + b);
             }
         }
     }
@@ -715,10 +744,11 @@ fn store_block<const R: usize, const N: usize>(
     bias: &[f32],
     y: &mut [f32],
     (at, ys): (usize, usize),
+    g: &impl Fn(f32) -> f32,
 ) {
     for (i, (a, &b)) in acc.iter().zip(bias).enumerate().take(rows) {
         for (y, &a) in y[at + i * ys..at + i * ys + N].iter_mut().zip(a) {
-            *y = a + b;
+            *y = g(a + b);
         }
     }
 }
@@ -984,6 +1014,41 @@ pub(super) fn transpose(x: &[f32], shape: &[usize], perm: &[usize], y: &mut [f32
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every activation applied as the product stores its blocks gives what activating the
+    /// finished rows afterwards gives, bit for bit: wide blocks, 8-column blocks and the last
+    /// columns, full and short row blocks.
+    #[test]
+    fn products_activated_as_stored_equal_activated_afterwards() {
+        let acts = [
+            Unary::Relu,
+            Unary::HardSwish,
+            Unary::HardSigmoid(0.2, 0.5),
+            Unary::Clip(-0.5, 0.75),
+            Unary::Sigmoid,
+            Unary::Exp,
+        ];
+        for (m, k, n) in [(16, 27, 37), (7, 5, 16), (12, 3, 9), (1, 40, 1), (6, 8, 24)] {
+            let x: Vec<f32> = (0..k * n)
+                .map(|i| ((i * 31 % 53) as f32 - 26.0) * 0.11)
+                .collect();
+            let w: Vec<f32> = (0..m * k)
+                .map(|i| ((i * 17 % 29) as f32 - 14.0) * 0.07)
+                .collect();
+            let bias: Vec<f32> = (0..m).map(|i| i as f32 * 0.3 - 1.0).collect();
+            let wp = pack_rows(&w, m, k);
+            let mut plain = vec![f32::NAN; m * n];
+            rows_product((m, k, n), &wp, &x, n, &bias, None, &mut plain, n);
+            for f in acts {
+                let mut want = plain.clone();
+                unary_in_place(f, &mut want);
+                let mut got = vec![f32::NAN; m * n];
+                rows_product((m, k, n), &wp, &x, n, &bias, Some(f), &mut got, n);
+                let bits = |v: &[f32]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&got), bits(&want), "{m} x {k} x {n}, {f:?}");
+            }
+        }
+    }
 
     /// The AVX-512 kernel's columns equal the 8-column kernel's bit for bit, over shapes with
     /// partial row blocks, a rest of columns (its masked tail) and strided rows. On a CPU without AVX-512 the
