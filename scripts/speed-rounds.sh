@@ -21,7 +21,7 @@
 #              issue 19 sets its targets with and without it, since it flips on small changes;
 #              empty for none)
 #   DECODE     where our runs decode (default inline; `ahead`, a thread beside the tracker, is
-#              how runs before 2026-12-07 were timed: it costs the tracker about 2 % here)
+#              how runs before c2f3101 (2026-12-06) were timed: it costs the tracker about 2 % here)
 #   BEVT_ARGS  more `bevt eval` arguments for both of our runs, split at spaces (e.g.
 #              "--set redetection.verifier_filter_hint=true": an option with and without the rules)
 # Boxes and logs of every run stay in a new directory under target/ (printed); nothing else

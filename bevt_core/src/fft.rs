@@ -163,6 +163,7 @@ impl Fft2 {
     ) {
         let (h, w, wc) = (self.grid.h, self.grid.w, self.wc);
         debug_assert!(input.len() >= h * w && spec.len() >= wc * h);
+        debug_assert!(window.is_none_or(|m| m.len() == h * w));
         let (r0, r1) = (r0.min(h), r1.min(h).max(r0.min(h)));
         let n = (r1 - r0) * self.row_len;
         if n > 0 {
@@ -170,7 +171,8 @@ impl Fft2 {
             let (bin, bout) = (&mut self.rows_in[..n], &mut self.rows_out[..n]);
             match &self.rows {
                 RowPlan::Even { fwd, tw_fwd, .. } => {
-                    // (A window not of the grid's size is never built; one would go unused.)
+                    // (The tracker builds its window for the grid; in a release build one of
+                    // another size would go unused rather than panic.)
                     if let Some(win) = window.and_then(|m| m.get(r0 * w..r1 * w)) {
                         for ((b, x), m) in bin
                             .iter_mut()

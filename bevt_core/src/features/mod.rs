@@ -56,16 +56,6 @@ impl FeatureMap {
         let n = self.grid.len();
         &self.data[d * n..(d + 1) * n]
     }
-
-    /// Multiplies every channel by `window` (same grid).
-    pub fn apply_window(&mut self, window: &[f32]) {
-        let n = self.grid.len();
-        for ch in self.data.chunks_exact_mut(n) {
-            for (v, w) in ch.iter_mut().zip(window) {
-                *v *= w;
-            }
-        }
-    }
 }
 
 /// Something that maps image patches to feature maps.
